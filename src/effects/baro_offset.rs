@@ -1,0 +1,29 @@
+//! `baro_offset`: the unknown offset of the barometric altitude (1 parameter, m).
+//!
+//! At a GPS row the barometer gives `up = baro + c`; the vertical residual is
+//! `(p_up - baro - c) / sigma_baro`, so `d r / d c = -1 / sigma_baro`. Added
+//! automatically whenever the log has a `baro_alt_m` column.
+
+use super::{Effect, ParamInfo};
+use crate::model::StartGuess;
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BaroOffset;
+
+impl Effect for BaroOffset {
+    fn id(&self) -> String {
+        "baro_offset".into()
+    }
+
+    fn params(&self) -> Vec<ParamInfo> {
+        vec![ParamInfo::new("offset", "m", 1.0)]
+    }
+
+    fn initial(&self, guess: &StartGuess) -> Vec<f64> {
+        vec![guess.baro_offset]
+    }
+
+    fn baro_offset(&self, p: &[f64]) -> Option<f64> {
+        Some(p[0])
+    }
+}

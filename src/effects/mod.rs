@@ -1,0 +1,307 @@
+//! Physical effects: each one a self-contained piece with its parameters, how
+//! it enters the model and its partial derivatives there.
+//!
+//! The model (see [`crate::model`]) has a few *sites* where an effect can act:
+//!
+//! | site | what the effect maps | used by |
+//! | --- | --- | --- |
+//! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments` |
+//! | distance | odometer distance `d_j` of step `j` -> corrected distance | `odometer_gain` |
+//! | start | initial orientation and position | `initial_orientation`, `initial_position` |
+//! | observation | what a GPS row is compared with | `baro_offset` |
+//! | prior | extra residuals on the parameters | `gyro_bias_segments` (random walk) |
+//!
+//! An effect implements only the sites it uses; the model chains the effects
+//! of a site in registry order and applies the chain rule, so the gradient
+//! stays one O(N) backward sweep and the Jacobian one O(N) forward sweep
+//! whatever the combination. Adding an effect = one file here plus one line
+//! in [`build`].
+
+mod baro_offset;
+mod gyro_bias;
+mod gyro_bias_segments;
+mod initial_orientation;
+mod initial_position;
+mod odometer_gain;
+
+pub use baro_offset::BaroOffset;
+pub use gyro_bias::GyroBias;
+pub use gyro_bias_segments::GyroBiasSegments;
+pub use initial_orientation::InitialOrientation;
+pub use initial_position::InitialPosition;
+pub use odometer_gain::OdometerGain;
+
+use nalgebra::{Matrix3, Vector3};
+
+use crate::model::{ModelError, ModelSpec, StartGuess};
+use crate::signals::Signals;
+
+/// Name, unit and display scale of one parameter (`shown = value * scale`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ParamInfo {
+    pub name: String,
+    pub unit: &'static str,
+    #[serde(skip)]
+    pub scale: f64,
+}
+
+impl ParamInfo {
+    pub fn new(name: impl Into<String>, unit: &'static str, scale: f64) -> Self {
+        Self {
+            name: name.into(),
+            unit,
+            scale,
+        }
+    }
+}
+
+/// Which optimisation step fits an effect's parameters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Role {
+    /// Fitted in step 1 and refined with the segments in step 2 (LM).
+    Global,
+    /// Fitted in step 1 only: degenerate with the per-segment parameters.
+    Step1Only,
+    /// Per-segment parameters, fitted in step 2.
+    Segments,
+}
+
+/// Up to three parameter columns touched at one step: `(local index, d out / d param)`.
+#[derive(Clone, Copy, Debug)]
+pub struct Columns<V: Copy> {
+    cols: [(usize, V); 3],
+    len: usize,
+}
+
+impl<V: Copy + Default> Default for Columns<V> {
+    fn default() -> Self {
+        Self {
+            cols: [(0, V::default()); 3],
+            len: 0,
+        }
+    }
+}
+
+impl<V: Copy + Default> Columns<V> {
+    #[inline]
+    pub fn push(&mut self, index: usize, value: V) {
+        self.cols[self.len] = (index, value);
+        self.len += 1;
+    }
+
+    #[inline]
+    pub fn as_slice(&self) -> &[(usize, V)] {
+        &self.cols[..self.len]
+    }
+}
+
+/// Partials of a gyro-site effect at one step: `d omega_out / d omega_in` and
+/// the parameter columns `d omega_out / d p`.
+#[derive(Clone, Copy, Debug)]
+pub struct GyroPartials {
+    pub d_in: Matrix3<f64>,
+    pub params: Columns<Vector3<f64>>,
+}
+
+impl GyroPartials {
+    /// `omega_out = omega_in - b`: identity in the input, `-I` in `b` (at `first..first+3`).
+    pub fn bias(first: usize) -> Self {
+        let mut params = Columns::default();
+        for a in 0..3 {
+            let mut e = Vector3::zeros();
+            e[a] = -1.0;
+            params.push(first + a, e);
+        }
+        Self {
+            d_in: Matrix3::identity(),
+            params,
+        }
+    }
+}
+
+/// Partials of a distance-site effect at one step.
+#[derive(Clone, Copy, Debug)]
+pub struct DistancePartials {
+    pub d_in: f64,
+    pub params: Columns<f64>,
+}
+
+/// Sparse rows of prior residuals: values and `(row, local column, value)` entries.
+#[derive(Clone, Debug, Default)]
+pub struct PriorRows {
+    pub residuals: Vec<f64>,
+    pub entries: Vec<(usize, usize, f64)>,
+}
+
+/// One physical effect. Default methods mean "does not act at this site".
+pub trait Effect: Send + Sync + std::fmt::Debug {
+    /// Fixed id used on the command line, in reports and in the app.
+    fn id(&self) -> String;
+    /// One entry per parameter.
+    fn params(&self) -> Vec<ParamInfo>;
+    fn n_params(&self) -> usize {
+        self.params().len()
+    }
+    fn role(&self) -> Role {
+        Role::Global
+    }
+    /// Starting values, from the guess made before step 1.
+    fn initial(&self, guess: &StartGuess) -> Vec<f64>;
+
+    /// Whether the effect acts at the gyro site.
+    fn acts_on_gyro(&self) -> bool {
+        false
+    }
+    /// Corrected rate of step `j`.
+    fn gyro(&self, _p: &[f64], _j: usize, omega: Vector3<f64>) -> Vector3<f64> {
+        omega
+    }
+    fn gyro_partials(&self, _p: &[f64], _j: usize, _omega: &Vector3<f64>) -> GyroPartials {
+        GyroPartials {
+            d_in: Matrix3::identity(),
+            params: Columns::default(),
+        }
+    }
+
+    fn acts_on_distance(&self) -> bool {
+        false
+    }
+    fn distance(&self, _p: &[f64], _j: usize, d: f64) -> f64 {
+        d
+    }
+    fn distance_partials(&self, _p: &[f64], _j: usize, _d: f64) -> DistancePartials {
+        DistancePartials {
+            d_in: 1.0,
+            params: Columns::default(),
+        }
+    }
+
+    /// Rotation vector (world frame) applied on the left of the start attitude guess.
+    fn initial_orientation(&self, _p: &[f64]) -> Option<Vector3<f64>> {
+        None
+    }
+    /// Offset (m) added to the start position guess.
+    fn initial_position(&self, _p: &[f64]) -> Option<Vector3<f64>> {
+        None
+    }
+    /// Offset (m) added to the barometric altitude to give local up.
+    fn baro_offset(&self, _p: &[f64]) -> Option<f64> {
+        None
+    }
+
+    /// Number of prior residual rows.
+    fn n_prior(&self) -> usize {
+        0
+    }
+    /// Prior residuals (already weighted) and their Jacobian entries.
+    fn prior(&self, _p: &[f64], _out: &mut PriorRows) {}
+
+    /// Parameters for this effect given another version of it (e.g. the same
+    /// effect on a different segment length). `None` if it cannot map them.
+    fn carry_over(&self, _other: &dyn Effect, _other_p: &[f64]) -> Option<Vec<f64>> {
+        None
+    }
+
+    /// Extra data for [`carry_over`](Effect::carry_over): segment boundaries (s).
+    fn segment_edges(&self) -> Option<&[f64]> {
+        None
+    }
+}
+
+/// Effect ids of the paper's model (`paper` on the command line).
+pub const PAPER: [&str; 5] = [
+    "initial_position",
+    "initial_orientation",
+    "odometer_gain",
+    "gyro_bias",
+    "gyro_bias_segments",
+];
+
+/// Expand a list of ids (`paper` stands for the paper's five) into effect ids
+/// in registry order, without duplicates. `baro_offset` is added whenever the
+/// log has a barometer.
+pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelError> {
+    let mut ids: Vec<String> = Vec::new();
+    for item in list {
+        for part in item.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            if part == "paper" {
+                ids.extend(PAPER.iter().map(|s| s.to_string()));
+            } else if known(part) {
+                ids.push(part.to_string());
+            } else {
+                return Err(ModelError::UnknownEffect(part.to_string()));
+            }
+        }
+    }
+    if signals.has_baro {
+        ids.push("baro_offset".into());
+    }
+    let order = |id: &str| REGISTRY.iter().position(|r| *r == id).unwrap_or(usize::MAX);
+    ids.sort_by_key(|id| order(id));
+    ids.dedup();
+    Ok(ids)
+}
+
+/// All ids in registry order (the order effects are chained in).
+pub const REGISTRY: [&str; 6] = [
+    "initial_position",
+    "initial_orientation",
+    "odometer_gain",
+    "gyro_bias",
+    "gyro_bias_segments",
+    "baro_offset",
+];
+
+fn known(id: &str) -> bool {
+    REGISTRY.contains(&id)
+}
+
+/// Build one effect by id.
+pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Effect>, ModelError> {
+    Ok(match id {
+        "initial_position" => Box::new(InitialPosition),
+        "initial_orientation" => Box::new(InitialOrientation),
+        "odometer_gain" => Box::new(OdometerGain),
+        "gyro_bias" => Box::new(GyroBias),
+        "gyro_bias_segments" => Box::new(GyroBiasSegments::new(signals, spec.segment_s, spec.bias_walk_dps_sqrt_s)?),
+        "baro_offset" => {
+            if !signals.has_baro {
+                return Err(ModelError::NotApplicable {
+                    effect: id.into(),
+                    reason: "the log has no baro_alt_m column".into(),
+                });
+            }
+            Box::new(BaroOffset)
+        }
+        other => return Err(ModelError::UnknownEffect(other.to_string())),
+    })
+}
+
+#[cfg(test)]
+pub(crate) mod testing {
+    //! Finite-difference checks shared by the effect tests.
+    use super::*;
+
+    /// Check `gyro_partials` of `effect` against central differences at step `j`.
+    pub fn check_gyro_partials(effect: &dyn Effect, p: &[f64], j: usize, omega: Vector3<f64>) {
+        let part = effect.gyro_partials(p, j, &omega);
+        let h = 1e-6;
+        for a in 0..3 {
+            let mut d = Vector3::zeros();
+            d[a] = h;
+            let fd = (effect.gyro(p, j, omega + d) - effect.gyro(p, j, omega - d)) / (2.0 * h);
+            assert!((fd - part.d_in.column(a)).norm() < 1e-7, "d_in column {a}");
+        }
+        let mut dense = vec![Vector3::zeros(); p.len()];
+        for &(i, v) in part.params.as_slice() {
+            dense[i] += v;
+        }
+        for (i, col) in dense.iter().enumerate() {
+            let (mut pp, mut pm) = (p.to_vec(), p.to_vec());
+            pp[i] += h;
+            pm[i] -= h;
+            let fd = (effect.gyro(&pp, j, omega) - effect.gyro(&pm, j, omega)) / (2.0 * h);
+            assert!((fd - col).norm() < 1e-7, "param {i}: fd {fd} vs {col}");
+        }
+    }
+}

@@ -1,0 +1,38 @@
+//! `odometer_gain`: metres travelled per metre the odometer reports (1 parameter).
+//!
+//! `d_t = k d_t^raw` (paper: the odometer gain). Covers a wrongly configured
+//! wheel circumference or a speed sensor's scale error; `d d_t / d k = d_t^raw`.
+
+use super::{Columns, DistancePartials, Effect, ParamInfo};
+use crate::model::StartGuess;
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct OdometerGain;
+
+impl Effect for OdometerGain {
+    fn id(&self) -> String {
+        "odometer_gain".into()
+    }
+
+    fn params(&self) -> Vec<ParamInfo> {
+        vec![ParamInfo::new("gain", "", 1.0)]
+    }
+
+    fn initial(&self, guess: &StartGuess) -> Vec<f64> {
+        vec![guess.odometer_gain]
+    }
+
+    fn acts_on_distance(&self) -> bool {
+        true
+    }
+
+    fn distance(&self, p: &[f64], _j: usize, d: f64) -> f64 {
+        p[0] * d
+    }
+
+    fn distance_partials(&self, p: &[f64], _j: usize, d: f64) -> DistancePartials {
+        let mut params = Columns::default();
+        params.push(0, d);
+        DistancePartials { d_in: p[0], params }
+    }
+}

@@ -1,0 +1,25 @@
+//! gyropath: reconstruct a vehicle's path from a MEMS gyroscope, a wheel
+//! odometer and 1 Hz GPS by estimating the gyro bias from the GPS (Engedy &
+//! Horvath, "Path Reconstruction based on Gyroscope Bias Estimation using GPS").
+//!
+//! Module map, in data-flow order:
+//! - [`loading`]: the ride-log CSV format into raw columns, with errors naming file, line and column.
+//! - [`signals`]: what is derived once: time steps, rad/s, distance per step, fixes in ENU.
+//! - [`geodesy`]: WGS84 <-> local east/north/up.
+//! - [`effects`]: one module per physical effect (parameters, where it acts, derivatives).
+//! - [`model`]: the path equations, residuals, cost, O(N) gradient and Jacobian.
+//! - [`optimisation`]: step 1 (globals, LM) and step 2 (segment biases, GD or LM), one iteration at a time.
+//! - [`export`]: reconstructed path CSV and JSON report.
+//! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
+
+pub mod effects;
+pub mod export;
+pub mod geodesy;
+pub mod loading;
+pub mod model;
+pub mod optimisation;
+pub mod signals;
+pub mod simulation;
+
+#[cfg(test)]
+pub(crate) mod testing;

@@ -1,0 +1,332 @@
+//! The path model (paper eq. 1-4), its residuals and cost (eq. 7), the O(N)
+//! gradient (eq. 12-20 as one adjoint sweep) and the Jacobian for LM.
+//!
+//! With `theta_j = omega_j dt_j` the corrected rotation of step `j` and `d_j`
+//! its corrected distance:
+//!
+//! ```text
+//! q_0 = Exp(phi) q_guess                  initial_orientation
+//! q_j = q_{j-1} g(theta_j)                eq. 1, g from eq. 3 or the exponential map
+//! Delta_j = (q_j f q_j*) d_j              eq. 4: forward axis f = x turned into the world
+//! p_j = p_{j-1} + Delta_j,  p_0 = p_guess + delta
+//! ```
+//!
+//! Each GPS row `k` (log row `i_k`) gives weighted residuals
+//! `r = (p_{i_k} - z_k) / sigma` for east, north, GPS up (if the fix has an
+//! altitude) and barometric up (if the log has a barometer), and the cost is
+//! `C = sum r^2` plus prior rows (eq. 7 with weights `1/sigma^2`).
+
+mod adjoint;
+mod jacobian;
+pub mod rotation;
+mod start;
+mod sweep;
+
+pub use rotation::Increment;
+pub use start::{StartError, StartGuess};
+pub use jacobian::Linearisation;
+pub use sweep::Trajectory;
+
+use std::sync::Arc;
+
+use nalgebra::{UnitQuaternion, Vector3};
+use thiserror::Error;
+
+use crate::effects::{self, Effect, ParamInfo, PriorRows, Role};
+use crate::signals::Signals;
+
+/// Why a model could not be built.
+#[derive(Debug, Error)]
+pub enum ModelError {
+    #[error(
+        "unknown effect '{0}' (known: paper, {known})",
+        known = effects::REGISTRY.join(", ")
+    )]
+    UnknownEffect(String),
+    #[error("effect '{effect}' does not apply: {reason}")]
+    NotApplicable { effect: String, reason: String },
+    #[error("{0}")]
+    Setting(String),
+    #[error(transparent)]
+    Start(#[from] StartError),
+}
+
+/// What the model is made of: which effects, and the settings that shape them.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ModelSpec {
+    /// Effect ids (`paper` expands to the paper's five).
+    pub effects: Vec<String>,
+    /// Length of a bias segment (s).
+    pub segment_s: f64,
+    /// Random-walk density of the segment-bias prior (deg/s/sqrt(s)); `None` = the paper (no prior).
+    pub bias_walk_dps_sqrt_s: Option<f64>,
+    /// GPS horizontal noise (m).
+    pub sigma_horizontal_m: f64,
+    /// GPS altitude noise (m).
+    pub sigma_vertical_m: f64,
+    /// Barometric altitude noise (m).
+    pub sigma_baro_m: f64,
+    pub increment: Increment,
+}
+
+impl Default for ModelSpec {
+    fn default() -> Self {
+        Self {
+            effects: vec!["paper".into()],
+            segment_s: 5.0,
+            bias_walk_dps_sqrt_s: Some(DEFAULT_BIAS_WALK),
+            sigma_horizontal_m: 3.0,
+            sigma_vertical_m: 8.0,
+            sigma_baro_m: 1.0,
+            increment: Increment::Exact,
+        }
+    }
+}
+
+/// Default random-walk density of the segment-bias prior (deg/s/sqrt(s)):
+/// the bias instability of a consumer MEMS gyro (about 10 deg/h drifting over
+/// minutes), not tuned on any ride.
+pub const DEFAULT_BIAS_WALK: f64 = 0.004;
+
+/// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
+/// position at `row`, compared with `target`, weighted by `w = 1/sigma`.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Observation {
+    pub row: usize,
+    pub axis: usize,
+    pub target: f64,
+    pub w: f64,
+    /// A barometric row: the baro offset is added to the target.
+    pub baro: bool,
+}
+
+/// Kind of a residual row (for splitting RMS figures).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RowKind {
+    Horizontal,
+    GpsUp,
+    BaroUp,
+    Prior,
+}
+
+/// A model: the ride's signals, the effects acting on them and where each
+/// effect's parameters sit in the parameter vector.
+#[derive(Debug)]
+pub struct Model {
+    pub signals: Arc<Signals>,
+    pub spec: ModelSpec,
+    effects: Vec<Box<dyn Effect>>,
+    /// `offsets[e]..offsets[e + 1]` are effect `e`'s parameters.
+    offsets: Vec<usize>,
+    pub start: StartGuess,
+    pub(crate) observations: Vec<Observation>,
+    gyro_chain: Vec<usize>,
+    distance_chain: Vec<usize>,
+    orientation: Option<usize>,
+    position: Option<usize>,
+    baro: Option<usize>,
+    n_prior: usize,
+}
+
+impl Model {
+    /// Build the model of `spec` on `signals`, with the start guess made from them.
+    pub fn new(signals: Arc<Signals>, spec: ModelSpec) -> Result<Self, ModelError> {
+        let start = StartGuess::from_signals(&signals)?;
+        Self::with_start(signals, spec, start)
+    }
+
+    /// Build with a given start guess (used when re-shaping a running fit).
+    pub fn with_start(signals: Arc<Signals>, spec: ModelSpec, start: StartGuess) -> Result<Self, ModelError> {
+        for (name, v) in [
+            ("GPS horizontal sigma", spec.sigma_horizontal_m),
+            ("GPS vertical sigma", spec.sigma_vertical_m),
+            ("barometer sigma", spec.sigma_baro_m),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(ModelError::Setting(format!("{name} must be a positive number of metres, got {v}")));
+            }
+        }
+        let ids = effects::expand(&spec.effects, &signals)?;
+        let effects: Vec<Box<dyn Effect>> = ids
+            .iter()
+            .map(|id| effects::build(id, &signals, &spec))
+            .collect::<Result<_, _>>()?;
+        let mut offsets = vec![0];
+        for e in &effects {
+            offsets.push(offsets.last().copied().unwrap_or(0) + e.n_params());
+        }
+        let find = |f: &dyn Fn(&dyn Effect) -> bool| effects.iter().position(|e| f(e.as_ref()));
+        let zeros = [0.0; 3];
+        let orientation = find(&|e| e.initial_orientation(&zeros).is_some());
+        let position = find(&|e| e.initial_position(&zeros).is_some());
+        let baro = find(&|e| e.baro_offset(&zeros).is_some());
+        let gyro_chain = (0..effects.len()).filter(|&e| effects[e].acts_on_gyro()).collect();
+        let distance_chain = (0..effects.len()).filter(|&e| effects[e].acts_on_distance()).collect();
+        let n_prior = effects.iter().map(|e| e.n_prior()).sum();
+
+        let mut observations = Vec::new();
+        for fix in &signals.fixes {
+            let wh = 1.0 / spec.sigma_horizontal_m;
+            for axis in 0..2 {
+                observations.push(Observation { row: fix.row, axis, target: fix.en[axis], w: wh, baro: false });
+            }
+            if let Some(up) = fix.up {
+                observations.push(Observation {
+                    row: fix.row,
+                    axis: 2,
+                    target: up,
+                    w: 1.0 / spec.sigma_vertical_m,
+                    baro: false,
+                });
+            }
+            if let (Some(b), Some(_)) = (fix.baro, baro) {
+                observations.push(Observation { row: fix.row, axis: 2, target: b, w: 1.0 / spec.sigma_baro_m, baro: true });
+            }
+        }
+        Ok(Self {
+            signals,
+            spec,
+            effects,
+            offsets,
+            start,
+            observations,
+            gyro_chain,
+            distance_chain,
+            orientation,
+            position,
+            baro,
+            n_prior,
+        })
+    }
+
+    pub fn n_params(&self) -> usize {
+        self.offsets.last().copied().unwrap_or(0)
+    }
+
+    pub fn effects(&self) -> &[Box<dyn Effect>] {
+        &self.effects
+    }
+
+    pub fn effect_ids(&self) -> Vec<String> {
+        self.effects.iter().map(|e| e.id()).collect()
+    }
+
+    /// Parameter range of effect `e`.
+    pub fn range(&self, e: usize) -> std::ops::Range<usize> {
+        self.offsets[e]..self.offsets[e + 1]
+    }
+
+    /// Index of the effect with this id.
+    pub fn effect_index(&self, id: &str) -> Option<usize> {
+        self.effects.iter().position(|e| e.id() == id)
+    }
+
+    /// Starting parameter vector.
+    pub fn initial_params(&self) -> Vec<f64> {
+        self.effects.iter().flat_map(|e| e.initial(&self.start)).collect()
+    }
+
+    /// Parameter descriptions, in parameter-vector order, with their effect id.
+    pub fn param_infos(&self) -> Vec<(String, ParamInfo)> {
+        self.effects
+            .iter()
+            .flat_map(|e| {
+                let id = e.id();
+                e.params().into_iter().map(move |p| (id.clone(), p))
+            })
+            .collect()
+    }
+
+    /// Which parameters each optimisation step frees.
+    pub fn free_mask(&self, roles: &[Role]) -> Vec<bool> {
+        let mut mask = vec![false; self.n_params()];
+        for (e, effect) in self.effects.iter().enumerate() {
+            if roles.contains(&effect.role()) {
+                for m in &mut mask[self.range(e)] {
+                    *m = true;
+                }
+            }
+        }
+        mask
+    }
+
+    /// Number of residual rows: observations then priors.
+    pub fn n_residuals(&self) -> usize {
+        self.observations.len() + self.n_prior
+    }
+
+    /// Kind of each residual row.
+    pub fn row_kinds(&self) -> Vec<RowKind> {
+        self.observations
+            .iter()
+            .map(|o| match (o.axis, o.baro) {
+                (2, true) => RowKind::BaroUp,
+                (2, false) => RowKind::GpsUp,
+                _ => RowKind::Horizontal,
+            })
+            .chain(std::iter::repeat_n(RowKind::Prior, self.n_prior))
+            .collect()
+    }
+
+    /// Parameters for this model from a fit of another model on the same ride:
+    /// effects present in both keep their values (or are mapped, e.g. onto new
+    /// segments), new ones start from their initial values.
+    pub fn carry_over(&self, other: &Model, other_params: &[f64]) -> Vec<f64> {
+        let mut p = self.initial_params();
+        for (e, effect) in self.effects.iter().enumerate() {
+            let Some(o) = other.effect_index(&effect.id()) else { continue };
+            let old = &other_params[other.range(o)];
+            let r = self.range(e);
+            if r.len() == old.len() && effect.segment_edges().is_none() {
+                p[r].copy_from_slice(old);
+            } else if let Some(mapped) = effect.carry_over(other.effects[o].as_ref(), old) {
+                p[r].copy_from_slice(&mapped);
+            }
+        }
+        p
+    }
+
+    fn params_of<'a>(&self, e: usize, theta: &'a [f64]) -> &'a [f64] {
+        &theta[self.offsets[e]..self.offsets[e + 1]]
+    }
+
+    /// Initial attitude and position for `theta`, and the world-rotation vector `phi`.
+    pub(crate) fn initial_state(&self, theta: &[f64]) -> (UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>) {
+        let phi = self
+            .orientation
+            .and_then(|e| self.effects[e].initial_orientation(self.params_of(e, theta)))
+            .unwrap_or_else(Vector3::zeros);
+        let q0 = UnitQuaternion::from_scaled_axis(phi) * self.start.attitude;
+        let dp = self
+            .position
+            .and_then(|e| self.effects[e].initial_position(self.params_of(e, theta)))
+            .unwrap_or_else(Vector3::zeros);
+        (q0, self.start.position + dp, phi)
+    }
+
+    pub(crate) fn baro_offset(&self, theta: &[f64]) -> f64 {
+        self.baro
+            .and_then(|e| self.effects[e].baro_offset(self.params_of(e, theta)))
+            .unwrap_or(0.0)
+    }
+
+    /// Prior rows of all effects, with columns in the global parameter vector.
+    pub(crate) fn prior_rows(&self, theta: &[f64]) -> PriorRows {
+        let mut all = PriorRows::default();
+        for (e, effect) in self.effects.iter().enumerate() {
+            if effect.n_prior() == 0 {
+                continue;
+            }
+            let mut rows = PriorRows::default();
+            effect.prior(self.params_of(e, theta), &mut rows);
+            let base = all.residuals.len();
+            all.residuals.extend_from_slice(&rows.residuals);
+            all.entries
+                .extend(rows.entries.iter().map(|&(r, c, v)| (base + r, self.offsets[e] + c, v)));
+        }
+        all
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,176 @@
+//! The start guess for step 1: heading, yaw bias, odometer gain, start
+//! position and barometer offset, from the GPS course and chords.
+//!
+//! A poor start heading can trap the least-squares fit far from the answer,
+//! and a raw phone-class gyro can carry several deg/s of bias (the heading of
+//! the comma2k19 drive drifts 233 deg in a minute without it). So the heading
+//! and the yaw bias come together from the GPS course: for consecutive fixes
+//! with a chord of a few metres, `delta_k = course_k - psi_raw(t_k)` (raw
+//! integrated heading) follows `delta(t) = psi_0 - b_z (t - t_0)`; a robust
+//! line fit (median of local slopes, then least squares within 3 MAD) gives
+//! both.
+
+use nalgebra::{UnitQuaternion, Vector3};
+use thiserror::Error;
+
+use crate::signals::Signals;
+
+/// Why no start could be found: the ride does not determine a heading.
+#[derive(Debug, Error)]
+pub enum StartError {
+    #[error(
+        "{file}: the GPS fixes never move more than {min_m} m between consecutive seconds, so the heading is unobservable (a ride without motion?)"
+    )]
+    NoMotion { file: String, min_m: f64 },
+}
+
+/// Starting point of the fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StartGuess {
+    /// Level attitude with the GPS heading.
+    pub attitude: UnitQuaternion<f64>,
+    pub position: Vector3<f64>,
+    /// rad/s; only the vertical (yaw) part is estimated.
+    pub gyro_bias: Vector3<f64>,
+    pub odometer_gain: f64,
+    pub baro_offset: f64,
+}
+
+/// Chords shorter than this give no course (m).
+const MIN_CHORD_M: f64 = 2.0;
+/// Consecutive fixes further apart than this are not used for a course (s).
+const MAX_FIX_GAP_S: f64 = 2.5;
+
+fn wrap(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    a - two_pi * ((a + std::f64::consts::PI) / two_pi).floor()
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+}
+
+impl StartGuess {
+    pub fn from_signals(sig: &Signals) -> Result<Self, StartError> {
+        let n = sig.len();
+        // Raw heading: integrate the measured rates from a level, east-facing start.
+        let mut q = UnitQuaternion::identity();
+        let mut psi = vec![0.0; n];
+        let mut unwrapped = 0.0;
+        let mut last = 0.0;
+        for j in 1..n {
+            q *= UnitQuaternion::from_scaled_axis(sig.gyro[j] * sig.dt[j]);
+            let f = q * Vector3::x();
+            let h = f.y.atan2(f.x);
+            unwrapped += wrap(h - last);
+            last = h;
+            psi[j] = unwrapped;
+        }
+        let t0 = sig.t[0];
+        // Course samples: (time since start, course - raw heading, chord length).
+        let mut samples: Vec<(f64, f64, f64)> = Vec::new();
+        let mut chord_sum = 0.0;
+        let mut odo_sum = 0.0;
+        for w in sig.fixes.windows(2) {
+            let (a, b) = (&w[0], &w[1]);
+            if b.t - a.t > MAX_FIX_GAP_S {
+                continue;
+            }
+            let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
+            let chord = de.hypot(dn);
+            let odo: f64 = sig.distance[a.row + 1..=b.row].iter().sum();
+            chord_sum += chord;
+            odo_sum += odo;
+            if chord < MIN_CHORD_M {
+                continue;
+            }
+            let mid = (a.row + b.row) / 2;
+            samples.push((sig.t[mid] - t0, dn.atan2(de) - psi[mid], chord));
+        }
+        if samples.len() < 2 {
+            return Err(StartError::NoMotion {
+                file: sig.source.clone(),
+                min_m: MIN_CHORD_M,
+            });
+        }
+        // Slope from neighbouring samples, robust to wrap-around and outliers.
+        let mut slopes: Vec<f64> = samples
+            .windows(2)
+            .filter(|w| w[1].0 - w[0].0 < 3.0 * MAX_FIX_GAP_S)
+            .map(|w| wrap(w[1].1 - w[0].1) / (w[1].0 - w[0].0))
+            .collect();
+        let slope0 = if slopes.is_empty() { 0.0 } else { median(&mut slopes) };
+        // Offset: circular mean of the detrended samples.
+        let (s, c) = samples.iter().fold((0.0, 0.0), |(s, c), &(t, d, w)| {
+            let x = d - slope0 * t;
+            (s + w * x.sin(), c + w * x.cos())
+        });
+        let offset0 = s.atan2(c);
+        // Refine by weighted least squares on the unwrapped residuals within 3 MAD.
+        let resid: Vec<f64> = samples.iter().map(|&(t, d, _)| wrap(d - offset0 - slope0 * t)).collect();
+        let mut abs: Vec<f64> = resid.iter().map(|r| r.abs()).collect();
+        let mad = median(&mut abs).max(0.01);
+        let (mut sw, mut st, mut sr, mut stt, mut str_) = (0.0, 0.0, 0.0, 0.0, 0.0);
+        for (&(t, _, w), &r) in samples.iter().zip(&resid) {
+            if r.abs() <= 3.0 * mad / 0.6745 {
+                sw += w;
+                st += w * t;
+                sr += w * r;
+                stt += w * t * t;
+                str_ += w * t * r;
+            }
+        }
+        let det = sw * stt - st * st;
+        let (da, db) = if sw > 0.0 && det.abs() > 1e-9 * sw * sw.max(1.0) {
+            ((stt * sr - st * str_) / det, (sw * str_ - st * sr) / det)
+        } else if sw > 0.0 {
+            (sr / sw, 0.0)
+        } else {
+            (0.0, 0.0)
+        };
+        let heading = offset0 + da;
+        let slope = slope0 + db;
+        let attitude = UnitQuaternion::from_scaled_axis(Vector3::z() * heading);
+        let gyro_bias = Vector3::new(0.0, 0.0, -slope);
+        let odometer_gain = if odo_sum > 10.0 && (0.5..2.0).contains(&(chord_sum / odo_sum)) {
+            chord_sum / odo_sum
+        } else {
+            1.0
+        };
+
+        // Dead-reckon with these guesses and place the start so the first fixes line up.
+        let mut q = attitude;
+        let mut p = Vector3::zeros();
+        let mut dr = vec![Vector3::zeros(); n];
+        for j in 1..n {
+            q *= UnitQuaternion::from_scaled_axis((sig.gyro[j] - gyro_bias) * sig.dt[j]);
+            p += q * Vector3::x() * (odometer_gain * sig.distance[j]);
+            dr[j] = p;
+        }
+        let first: Vec<_> = sig.fixes.iter().take_while(|f| f.t - sig.fixes[0].t <= 30.0).collect();
+        let m = first.len() as f64;
+        let mut position = Vector3::zeros();
+        for f in &first {
+            position.x += (f.en[0] - dr[f.row].x) / m;
+            position.y += (f.en[1] - dr[f.row].y) / m;
+        }
+        let ups: Vec<f64> = first.iter().filter_map(|f| f.up.map(|u| u - dr[f.row].z)).collect();
+        if !ups.is_empty() {
+            position.z = ups.iter().sum::<f64>() / ups.len() as f64;
+        }
+        let baros: Vec<f64> = first
+            .iter()
+            .filter_map(|f| f.baro.map(|b| position.z + dr[f.row].z - b))
+            .collect();
+        let baro_offset = if baros.is_empty() { 0.0 } else { baros.iter().sum::<f64>() / baros.len() as f64 };
+        Ok(Self {
+            attitude,
+            position,
+            gyro_bias,
+            odometer_gain,
+            baro_offset,
+        })
+    }
+}

@@ -1,0 +1,94 @@
+//! Derivative checks: the analytic gradient and Jacobian against central
+//! finite differences, for both increment maps and every effect.
+
+use std::sync::Arc;
+
+use super::*;
+use crate::testing::winding_signals;
+
+fn model(increment: Increment, walk: Option<f64>) -> Model {
+    let sig = Arc::new(winding_signals(60.0, 50.0));
+    let spec = ModelSpec {
+        segment_s: 7.0,
+        bias_walk_dps_sqrt_s: walk,
+        increment,
+        ..ModelSpec::default()
+    };
+    Model::new(sig, spec).unwrap()
+}
+
+/// A parameter vector away from the start so every term is non-trivial.
+fn perturbed(m: &Model) -> Vec<f64> {
+    let mut p = m.initial_params();
+    for (i, v) in p.iter_mut().enumerate() {
+        *v += 1e-3 * ((i as f64 * 1.7).sin());
+    }
+    p
+}
+
+fn fd_gradient(m: &Model, p: &[f64], i: usize) -> f64 {
+    let h = 1e-6 * (1.0 + p[i].abs());
+    let (mut a, mut b) = (p.to_vec(), p.to_vec());
+    a[i] += h;
+    b[i] -= h;
+    (m.cost(&a) - m.cost(&b)) / (2.0 * h)
+}
+
+#[test]
+fn gradient_matches_finite_differences() {
+    for inc in [Increment::Exact, Increment::SmallAngle] {
+        let m = model(inc, Some(0.01));
+        let p = perturbed(&m);
+        let (cost, g) = m.gradient(&p);
+        assert!((cost - m.cost(&p)).abs() < 1e-9 * cost);
+        let scale = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        for i in 0..p.len() {
+            let fd = fd_gradient(&m, &p, i);
+            let err = (fd - g[i]).abs() / (g[i].abs() + 1e-6 * scale);
+            assert!(err < 1e-5, "{inc:?} param {i} {:?}: analytic {} fd {fd}", m.param_infos()[i], g[i]);
+        }
+    }
+}
+
+#[test]
+fn jacobian_matches_finite_differences_and_the_gradient() {
+    for inc in [Increment::Exact, Increment::SmallAngle] {
+        let m = model(inc, Some(0.01));
+        let p = perturbed(&m);
+        let free = vec![true; m.n_params()];
+        let lin = m.linearise(&p, &free);
+        let r0 = m.residuals(&p);
+        assert_eq!(lin.residuals.len(), r0.len());
+        for (a, b) in lin.residuals.iter().zip(&r0) {
+            assert!((a - b).abs() < 1e-9);
+        }
+        let (_, g) = m.gradient(&p);
+        let jtr = lin.jacobian.transpose() * &lin.residuals * 2.0;
+        for i in 0..p.len() {
+            assert!((jtr[i] - g[i]).abs() < 1e-7 * (1.0 + g[i].abs()), "param {i}: {} vs {}", jtr[i], g[i]);
+            let h = 1e-6;
+            let (mut a, mut b) = (p.clone(), p.clone());
+            a[i] += h;
+            b[i] -= h;
+            let (ra, rb) = (m.residuals(&a), m.residuals(&b));
+            for r in 0..ra.len() {
+                let fd = (ra[r] - rb[r]) / (2.0 * h);
+                let an = lin.jacobian[(r, i)];
+                assert!((fd - an).abs() < 1e-5 * (1.0 + an.abs()), "{inc:?} row {r} param {i}: {an} vs {fd}");
+            }
+        }
+    }
+}
+
+#[test]
+fn jacobian_of_a_subset_is_the_matching_columns() {
+    let m = model(Increment::Exact, None);
+    let p = perturbed(&m);
+    let all = m.linearise(&p, &vec![true; m.n_params()]);
+    let mask = m.free_mask(&[effects::Role::Segments]);
+    let sub = m.linearise(&p, &mask);
+    assert_eq!(sub.columns.len(), mask.iter().filter(|&&f| f).count());
+    for (c, &i) in sub.columns.iter().enumerate() {
+        assert_eq!(sub.jacobian.column(c), all.jacobian.column(i));
+    }
+}

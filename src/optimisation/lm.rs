@@ -1,0 +1,113 @@
+//! Levenberg-Marquardt that cannot diverge (paper eq. 10-11, made safe).
+//!
+//! One iteration linearises once, then solves
+//! `(J^T J + lambda D) delta = -J^T r` with `D = diag(J^T J)` (Marquardt's
+//! scaling, floored so unobservable directions stay bounded). A step is
+//! accepted only if the cost is finite and lower; otherwise lambda grows
+//! (x nu, nu doubling) and the solve is retried with the same linearisation.
+//! After an accepted step lambda shrinks by Nielsen's rule
+//! `max(1/3, 1 - (2 rho - 1)^3)`, `rho` = actual / predicted decrease.
+//! The paper's LM diverged because it took every step; this one never
+//! raises the cost.
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::model::Model;
+
+/// Damping state carried between iterations.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmState {
+    pub lambda: f64,
+    nu: f64,
+}
+
+impl LmState {
+    pub fn new(lambda: f64) -> Self {
+        Self {
+            lambda: lambda.clamp(LAMBDA_MIN, LAMBDA_MAX),
+            nu: 2.0,
+        }
+    }
+}
+
+const LAMBDA_MIN: f64 = 1e-12;
+const LAMBDA_MAX: f64 = 1e16;
+const MAX_TRIES: usize = 12;
+
+/// What one iteration did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepOutcome {
+    pub cost_before: f64,
+    pub cost: f64,
+    pub accepted: bool,
+    /// No further progress is expected (tiny decrease, or no step lowers the cost).
+    pub converged: bool,
+    /// Cost evaluations made.
+    pub evaluations: usize,
+}
+
+/// Solve `(A + lambda D) x = b` by Cholesky, `D = diag(A)` floored at
+/// `1e-9 max(diag)` (and at 1e-12 absolute) so directions the data cannot see keep a finite step.
+pub fn damped_solve(a: &DMatrix<f64>, b: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
+    let n = a.nrows();
+    let max_diag = (0..n).map(|i| a[(i, i)]).fold(0.0f64, f64::max);
+    let floor = (1e-9 * max_diag).max(1e-12);
+    let mut m = a.clone();
+    for i in 0..n {
+        m[(i, i)] += lambda * a[(i, i)].max(floor) + 1e-15 * max_diag;
+    }
+    let chol = m.cholesky()?;
+    let x = chol.solve(b);
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// One LM iteration on the parameters where `free` is true.
+pub fn iterate(
+    model: &Model,
+    theta: &mut [f64],
+    free: &[bool],
+    state: &mut LmState,
+    tolerance: f64,
+) -> StepOutcome {
+    let lin = model.linearise(theta, free);
+    let cost = lin.cost;
+    let jt = lin.jacobian.transpose();
+    let a = &jt * &lin.jacobian;
+    let g = &jt * &lin.residuals;
+    let neg_g = -&g;
+    let mut evaluations = 0;
+    let mut trial = theta.to_vec();
+    for _ in 0..MAX_TRIES {
+        if let Some(delta) = damped_solve(&a, &neg_g, state.lambda) {
+            for (c, &i) in lin.columns.iter().enumerate() {
+                trial[i] = theta[i] + delta[c];
+            }
+            let new_cost = model.cost(&trial);
+            evaluations += 1;
+            if new_cost.is_finite() && new_cost < cost {
+                let predicted = -(2.0 * delta.dot(&g) + delta.dot(&(&a * &delta)));
+                let rho = if predicted > 0.0 { (cost - new_cost) / predicted } else { 0.0 };
+                state.lambda = (state.lambda * (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3)))
+                    .clamp(LAMBDA_MIN, LAMBDA_MAX);
+                state.nu = 2.0;
+                theta.copy_from_slice(&trial);
+                return StepOutcome {
+                    cost_before: cost,
+                    cost: new_cost,
+                    accepted: true,
+                    converged: cost - new_cost <= tolerance * cost,
+                    evaluations,
+                };
+            }
+        }
+        state.lambda = (state.lambda * state.nu).clamp(LAMBDA_MIN, LAMBDA_MAX);
+        state.nu = (state.nu * 2.0).min(1e6);
+    }
+    StepOutcome {
+        cost_before: cost,
+        cost,
+        accepted: false,
+        converged: true,
+        evaluations,
+    }
+}

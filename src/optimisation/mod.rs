@@ -1,0 +1,368 @@
+//! Fitting, one iteration at a time (problem / solver / observer split).
+//!
+//! Step 1 fits the global parameters (constant bias, start orientation and
+//! position, odometer gain, barometer offset) with Levenberg-Marquardt (a
+//! Gauss-Newton method with a trust region). Step 2 fits the per-segment
+//! biases with gradient descent or LM; LM also refines the globals except the
+//! constant bias, which the segments absorb. [`Reconstruction::iterate`] does
+//! one iteration and reports it; [`Reconstruction::apply_settings`] changes
+//! segment length, method, step size, damping or model between iterations
+//! without starting over (parameters carry over, segments are re-mapped).
+
+pub mod gd;
+pub mod lm;
+
+use std::sync::Arc;
+
+use thiserror::Error;
+
+use crate::effects::Role;
+use crate::model::{Model, ModelError, ModelSpec, RowKind, Trajectory};
+use crate::signals::Signals;
+
+pub use gd::GdState;
+pub use lm::{LmState, StepOutcome};
+
+/// Why a fit could not be set up.
+#[derive(Debug, Error)]
+pub enum FitError {
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    #[error("{0}")]
+    Setting(String),
+    #[error(
+        "{file}: {fixes} GPS fixes give {rows} residuals, fewer than the {params} parameters of the model; use longer segments or a longer ride"
+    )]
+    TooFewFixes {
+        file: String,
+        fixes: usize,
+        rows: usize,
+        params: usize,
+    },
+}
+
+/// Step-2 optimiser.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// Levenberg-Marquardt (paper eq. 10-11, with step rejection).
+    #[default]
+    Lm,
+    /// Gradient descent (paper eq. 8-9, with step-size backtracking).
+    Gd,
+}
+
+/// Everything a fit can be told.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FitSettings {
+    pub model: ModelSpec,
+    pub method: Method,
+    /// Gradient-descent step size gamma (deg/s per unit of dC/d(deg/s)).
+    pub step_size: f64,
+    /// Initial LM damping lambda.
+    pub damping: f64,
+    /// Iteration limit for each step.
+    pub max_iter: usize,
+    /// Stop when an accepted step lowers the cost by less than this fraction.
+    pub tolerance: f64,
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        Self {
+            model: ModelSpec::default(),
+            method: Method::Lm,
+            step_size: 1e-6,
+            damping: 1e-3,
+            max_iter: 200,
+            tolerance: 1e-7,
+        }
+    }
+}
+
+impl FitSettings {
+    fn validate(&self) -> Result<(), FitError> {
+        if !(self.step_size.is_finite() && self.step_size > 0.0) {
+            return Err(FitError::Setting(format!("step size must be positive, got {}", self.step_size)));
+        }
+        if !(self.damping.is_finite() && self.damping >= 0.0) {
+            return Err(FitError::Setting(format!("damping must be zero or positive, got {}", self.damping)));
+        }
+        if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
+            return Err(FitError::Setting(format!("tolerance must be zero or positive, got {}", self.tolerance)));
+        }
+        Ok(())
+    }
+}
+
+/// Where a fit is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Phase {
+    /// Global parameters (constant bias, start, gain).
+    Step1,
+    /// Per-segment biases.
+    Step2,
+    Done,
+}
+
+/// What one iteration did, for observers.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct IterationReport {
+    /// Iteration count over the whole fit (1-based).
+    pub iteration: usize,
+    pub phase: Phase,
+    pub method: Method,
+    pub cost: f64,
+    pub accepted: bool,
+    /// Horizontal distance RMS between path and GPS fixes (m).
+    pub rms_horizontal_m: f64,
+    pub damping: f64,
+    pub step_size: f64,
+    /// The settings changed just before this iteration.
+    pub settings_changed: bool,
+    /// The phase finished with this iteration.
+    pub phase_finished: bool,
+}
+
+/// Fit statistics of a parameter vector.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct FitStats {
+    pub cost: f64,
+    /// Horizontal distance path - fix, RMS over fixes (m).
+    pub rms_horizontal_m: f64,
+    /// Path up - GPS altitude, RMS (m), if the log has GPS altitude.
+    pub rms_gps_up_m: Option<f64>,
+    /// Path up - (baro + offset), RMS (m), if the log has a barometer.
+    pub rms_baro_up_m: Option<f64>,
+}
+
+impl FitStats {
+    pub fn of(model: &Model, theta: &[f64]) -> Self {
+        let r = model.residuals(theta);
+        let kinds = model.row_kinds();
+        let obs = &model.observations;
+        let mut sums = [0.0; 3];
+        let mut counts = [0usize; 3];
+        for (i, kind) in kinds.iter().enumerate() {
+            let slot = match kind {
+                RowKind::Horizontal => 0,
+                RowKind::GpsUp => 1,
+                RowKind::BaroUp => 2,
+                RowKind::Prior => continue,
+            };
+            let metres = r[i] / obs[i].w;
+            sums[slot] += metres * metres;
+            counts[slot] += 1;
+        }
+        let rms = |s: usize| (counts[s] > 0).then(|| (sums[s] / counts[s] as f64).sqrt());
+        Self {
+            cost: r.iter().map(|v| v * v).sum(),
+            // Two horizontal rows per fix: RMS of the 2-D distance.
+            rms_horizontal_m: (sums[0] / (counts[0] / 2).max(1) as f64).sqrt(),
+            rms_gps_up_m: rms(1),
+            rms_baro_up_m: rms(2),
+        }
+    }
+}
+
+/// Receives every iteration (the CLI's progress, the app's worker, tests).
+pub trait Observer {
+    fn on_iteration(&mut self, fit: &Reconstruction, report: &IterationReport);
+}
+
+impl<F: FnMut(&Reconstruction, &IterationReport)> Observer for F {
+    fn on_iteration(&mut self, fit: &Reconstruction, report: &IterationReport) {
+        self(fit, report)
+    }
+}
+
+/// A running reconstruction: model, parameters, phase and optimiser state.
+#[derive(Debug)]
+pub struct Reconstruction {
+    model: Model,
+    theta: Vec<f64>,
+    settings: FitSettings,
+    phase: Phase,
+    lm: LmState,
+    gd: GdState,
+    iteration: usize,
+    phase_iterations: [usize; 2],
+    settings_changed: bool,
+    history: Vec<IterationReport>,
+}
+
+impl Reconstruction {
+    /// Set up a fit of `settings.model` on `signals`, at the start guess.
+    pub fn new(signals: Arc<Signals>, settings: FitSettings) -> Result<Self, FitError> {
+        settings.validate()?;
+        let model = Model::new(signals, settings.model.clone())?;
+        check_observability(&model)?;
+        let theta = model.initial_params();
+        Ok(Self {
+            lm: LmState::new(settings.damping),
+            gd: GdState::new(settings.step_size),
+            model,
+            theta,
+            settings,
+            phase: Phase::Step1,
+            iteration: 0,
+            phase_iterations: [0, 0],
+            settings_changed: false,
+            history: Vec::new(),
+        })
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    pub fn params(&self) -> &[f64] {
+        &self.theta
+    }
+
+    pub fn settings(&self) -> &FitSettings {
+        &self.settings
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.phase
+    }
+
+    pub fn is_done(&self) -> bool {
+        self.phase == Phase::Done
+    }
+
+    /// Iterations spent in step 1 and step 2.
+    pub fn phase_iterations(&self) -> [usize; 2] {
+        self.phase_iterations
+    }
+
+    pub fn history(&self) -> &[IterationReport] {
+        &self.history
+    }
+
+    pub fn trajectory(&self) -> Trajectory {
+        self.model.trajectory(&self.theta)
+    }
+
+    pub fn stats(&self) -> FitStats {
+        FitStats::of(&self.model, &self.theta)
+    }
+
+    fn mask(&self, phase: Phase) -> Vec<bool> {
+        match (phase, self.settings.method) {
+            (Phase::Step1, _) => self.model.free_mask(&[Role::Global, Role::Step1Only]),
+            (_, Method::Lm) => self.model.free_mask(&[Role::Global, Role::Segments]),
+            (_, Method::Gd) => self.model.free_mask(&[Role::Segments]),
+        }
+    }
+
+    fn has_segments(&self) -> bool {
+        self.model.effects().iter().any(|e| e.role() == Role::Segments)
+    }
+
+    /// One iteration of the current phase. Does nothing once the fit is done.
+    pub fn iterate(&mut self) -> Option<IterationReport> {
+        let phase = self.phase;
+        let slot = match phase {
+            Phase::Step1 => 0,
+            Phase::Step2 => 1,
+            Phase::Done => return None,
+        };
+        let free = self.mask(phase);
+        let tol = self.settings.tolerance;
+        let outcome = if phase == Phase::Step2 && self.settings.method == Method::Gd {
+            let scale: Vec<f64> = self.model.param_infos().iter().map(|(_, p)| p.scale).collect();
+            gd::iterate(&self.model, &mut self.theta, &free, &scale, &mut self.gd, tol)
+        } else if free.iter().any(|&f| f) {
+            lm::iterate(&self.model, &mut self.theta, &free, &mut self.lm, tol)
+        } else {
+            let c = self.model.cost(&self.theta);
+            StepOutcome { cost_before: c, cost: c, accepted: false, converged: true, evaluations: 1 }
+        };
+        self.iteration += 1;
+        self.phase_iterations[slot] += 1;
+        let finished = outcome.converged || self.phase_iterations[slot] >= self.settings.max_iter;
+        if finished {
+            self.phase = match phase {
+                Phase::Step1 if self.has_segments() => Phase::Step2,
+                _ => Phase::Done,
+            };
+            self.lm = LmState::new(self.settings.damping);
+            self.gd = GdState::new(self.settings.step_size);
+        }
+        let report = IterationReport {
+            iteration: self.iteration,
+            phase,
+            method: if phase == Phase::Step1 { Method::Lm } else { self.settings.method },
+            cost: outcome.cost,
+            accepted: outcome.accepted,
+            rms_horizontal_m: FitStats::of(&self.model, &self.theta).rms_horizontal_m,
+            damping: self.lm.lambda,
+            step_size: self.gd.gamma,
+            settings_changed: std::mem::take(&mut self.settings_changed),
+            phase_finished: finished,
+        };
+        self.history.push(report.clone());
+        Some(report)
+    }
+
+    /// Iterate until done, reporting each iteration to `observer`.
+    pub fn run(&mut self, observer: &mut dyn Observer) {
+        while let Some(report) = self.iterate() {
+            observer.on_iteration(self, &report);
+        }
+    }
+
+    /// Change settings between iterations. A changed model (effects, segment
+    /// length, prior, noise levels, increment map) is rebuilt on the same start
+    /// guess and the current parameters carried over (segment biases are
+    /// averaged onto the new segments); new effects send the fit back to step 1,
+    /// other changes of a finished fit resume step 2.
+    pub fn apply_settings(&mut self, new: FitSettings) -> Result<(), FitError> {
+        new.validate()?;
+        if new == self.settings {
+            return Ok(());
+        }
+        let effects_changed = new.model.effects != self.settings.model.effects;
+        if new.model != self.settings.model {
+            let model = Model::with_start(self.model.signals.clone(), new.model.clone(), self.model.start.clone())?;
+            check_observability(&model)?;
+            self.theta = model.carry_over(&self.model, &self.theta);
+            self.model = model;
+        }
+        if new.damping != self.settings.damping {
+            self.lm = LmState::new(new.damping);
+        }
+        if new.step_size != self.settings.step_size || new.method != self.settings.method {
+            self.gd = GdState::new(new.step_size);
+        }
+        if effects_changed {
+            self.phase = Phase::Step1;
+            self.phase_iterations = [0, 0];
+        } else if self.phase == Phase::Done && self.has_segments() {
+            self.phase = Phase::Step2;
+            self.phase_iterations[1] = 0;
+        }
+        self.settings = new;
+        self.settings_changed = true;
+        Ok(())
+    }
+}
+
+/// Refuse models with more parameters than residual rows: the fit would be
+/// fitting noise (or singular) and the path would look plausible but be wrong.
+fn check_observability(model: &Model) -> Result<(), FitError> {
+    let rows = model.observations.len();
+    let params = model.n_params();
+    if rows < params {
+        return Err(FitError::TooFewFixes {
+            file: model.signals.source.clone(),
+            fixes: model.signals.fixes.len(),
+            rows,
+            params,
+        });
+    }
+    Ok(())
+}

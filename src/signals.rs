@@ -1,0 +1,376 @@
+//! What is derived from a ride log once, before any fitting: time steps,
+//! gyro rates in rad/s, raw distance per step, GPS fixes in a local ENU frame,
+//! the vertical references and the extra channels.
+//!
+//! Row `j` of the log closes the step `(t_{j-1}, t_j]`: its gyro value is the
+//! mean rate over that step and `distance[j]` the odometer distance covered in
+//! it. Row 0 only fixes the start (`dt[0] = 0`, `distance[0] = 0`).
+
+use nalgebra::Vector3;
+use thiserror::Error;
+
+use crate::geodesy::{Geodetic, LocalFrame};
+use crate::loading::RideLog;
+
+/// Why a loaded log cannot be used for a reconstruction.
+#[derive(Debug, Error)]
+pub enum SignalError {
+    #[error("{file}: {message}")]
+    Unusable { file: String, message: String },
+    #[error("{file}:{line}: column '{column}': {message}")]
+    Field {
+        file: String,
+        line: u64,
+        column: String,
+        message: String,
+    },
+}
+
+/// One GPS fix, in the local frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fix {
+    /// Row of the log that holds it.
+    pub row: usize,
+    pub t: f64,
+    /// East and north (m).
+    pub en: [f64; 2],
+    /// GPS altitude in the local frame (m), when the log has it on this row.
+    pub up: Option<f64>,
+    /// Barometric altitude (m, unknown offset) at this row, when the log has a barometer.
+    pub baro: Option<f64>,
+}
+
+/// Everything the model needs from a log, in SI units.
+#[derive(Clone, Debug)]
+pub struct Signals {
+    pub source: String,
+    pub t: Vec<f64>,
+    /// `dt[j] = t_j - t_{j-1}`, `dt[0] = 0`.
+    pub dt: Vec<f64>,
+    /// Measured angular rate (rad/s), sensor frame, mean over step `j`.
+    pub gyro: Vec<Vector3<f64>>,
+    /// Odometer distance over step `j` (m) before any gain correction.
+    pub distance: Vec<f64>,
+    pub fixes: Vec<Fix>,
+    /// Row index -> fix index (or `u32::MAX`).
+    pub fix_at_row: Vec<u32>,
+    pub frame: LocalFrame,
+    pub has_baro: bool,
+    pub has_gps_alt: bool,
+    /// Extra channels, interpolated over empty fields.
+    pub channels: Vec<(String, Vec<f64>)>,
+    /// How distance was measured, for reports.
+    pub odometer: Odometer,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum Odometer {
+    WheelPulses {
+        circumference_m: f64,
+        revolutions: usize,
+    },
+    Cumulative,
+}
+
+const NO_FIX: u32 = u32::MAX;
+
+impl Signals {
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    pub fn duration(&self) -> f64 {
+        self.t.last().copied().unwrap_or(0.0) - self.t.first().copied().unwrap_or(0.0)
+    }
+
+    /// Index of the fix on `row`, if any.
+    pub fn fix_index(&self, row: usize) -> Option<usize> {
+        match self.fix_at_row[row] {
+            NO_FIX => None,
+            k => Some(k as usize),
+        }
+    }
+
+    /// Derive the signals of a loaded log.
+    pub fn from_log(log: &RideLog) -> Result<Self, SignalError> {
+        let file = log.source.clone();
+        let unusable = |message: String| SignalError::Unusable {
+            file: file.clone(),
+            message,
+        };
+        let n = log.len();
+        if n < 2 {
+            return Err(unusable("the log needs at least two rows".into()));
+        }
+        let t = log.t_s.clone();
+        let mut dt = vec![0.0; n];
+        for j in 1..n {
+            dt[j] = t[j] - t[j - 1];
+        }
+        let gyro: Vec<Vector3<f64>> = log
+            .gyro_dps
+            .iter()
+            .map(|g| Vector3::new(g[0], g[1], g[2]) * std::f64::consts::PI / 180.0)
+            .collect();
+
+        let (distance, odometer) = if let Some(odo) = &log.odo_m {
+            (distance_from_odometer(odo, log)?, Odometer::Cumulative)
+        } else if let Some(pulses) = &log.wheel_pulse {
+            let c: f64 = log
+                .wheel_circumference_m()
+                .and_then(|s| s.parse().ok())
+                .ok_or_else(|| unusable("wheel_circumference_m is missing".into()))?;
+            let (d, revolutions) = distance_from_pulses(&t, pulses, c);
+            (
+                d,
+                Odometer::WheelPulses {
+                    circumference_m: c,
+                    revolutions,
+                },
+            )
+        } else {
+            return Err(unusable("the log has no distance column".into()));
+        };
+
+        let first = log
+            .fix
+            .iter()
+            .position(Option::is_some)
+            .ok_or_else(|| unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into()))?;
+        let (lat0, lon0) = log.fix[first].unwrap_or_default();
+        let alt0 = log
+            .gps_alt_m
+            .as_ref()
+            .and_then(|a| a.iter().flatten().next().copied())
+            .unwrap_or(0.0);
+        let frame = LocalFrame::new(Geodetic::new(lat0, lon0, alt0));
+        if let Some(raw) = &log.baro_alt_m
+            && raw.iter().all(Option::is_none)
+        {
+            return Err(SignalError::Field {
+                file,
+                line: log.line[0],
+                column: "baro_alt_m".into(),
+                message: "the column is empty on every row".into(),
+            });
+        }
+        let baro = log.baro_alt_m.as_ref().map(|b| fill_gaps(b));
+
+        let mut fixes = Vec::new();
+        let mut fix_at_row = vec![NO_FIX; n];
+        for (row, f) in log.fix.iter().enumerate() {
+            if let Some((lat, lon)) = *f {
+                let up = log.gps_alt_m.as_ref().and_then(|a| a[row]);
+                let enu = frame.to_enu(&Geodetic::new(lat, lon, up.unwrap_or(alt0)));
+                fix_at_row[row] = fixes.len() as u32;
+                fixes.push(Fix {
+                    row,
+                    t: t[row],
+                    en: [enu.x, enu.y],
+                    up: up.map(|_| enu.z),
+                    baro: baro.as_ref().map(|b| b[row]),
+                });
+            }
+        }
+        if fixes.len() < 2 {
+            return Err(unusable(format!(
+                "the log has {} GPS fix; at least two are needed",
+                fixes.len()
+            )));
+        }
+        let has_gps_alt = fixes.iter().any(|f| f.up.is_some());
+        let channels = log
+            .channels
+            .iter()
+            .filter(|(_, v)| v.iter().any(Option::is_some))
+            .map(|(name, v)| (name.clone(), fill_gaps(v)))
+            .collect();
+        Ok(Self {
+            source: file,
+            t,
+            dt,
+            gyro,
+            distance,
+            fixes,
+            fix_at_row,
+            frame,
+            has_baro: baro.is_some(),
+            has_gps_alt,
+            channels,
+            odometer,
+            warnings: log.warnings.clone(),
+        })
+    }
+
+    /// Values of an extra channel by name.
+    pub fn channel(&self, name: &str) -> Option<&[f64]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.as_slice())
+    }
+}
+
+/// Per-step distance from a cumulative odometer; empty fields are interpolated.
+fn distance_from_odometer(odo: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>, SignalError> {
+    if odo.iter().all(Option::is_none) {
+        return Err(SignalError::Field {
+            file: log.source.clone(),
+            line: log.line[0],
+            column: "odo_m".into(),
+            message: "the column is empty on every row".into(),
+        });
+    }
+    let filled = fill_gaps(odo);
+    let mut d = vec![0.0; filled.len()];
+    for j in 1..filled.len() {
+        let step = filled[j] - filled[j - 1];
+        if step < -1e-6 {
+            return Err(SignalError::Field {
+                file: log.source.clone(),
+                line: log.line[j],
+                column: "odo_m".into(),
+                message: format!(
+                    "cumulative distance decreases ({} after {})",
+                    filled[j],
+                    filled[j - 1]
+                ),
+            });
+        }
+        d[j] = step.max(0.0);
+    }
+    Ok(d)
+}
+
+/// Linear interpolation over empty fields; ends are held at the nearest value.
+pub fn fill_gaps(v: &[Option<f64>]) -> Vec<f64> {
+    let mut out = vec![0.0; v.len()];
+    let known: Vec<usize> = (0..v.len()).filter(|&i| v[i].is_some()).collect();
+    let Some((&first, &last)) = known.first().zip(known.last()) else {
+        return out;
+    };
+    let value = |i: usize| v[i].unwrap_or(0.0);
+    for o in out.iter_mut().take(first) {
+        *o = value(first);
+    }
+    for w in known.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        for (i, o) in out.iter_mut().enumerate().take(b + 1).skip(a) {
+            let s = (i - a) as f64 / (b - a) as f64;
+            *o = value(a) + s * (value(b) - value(a));
+        }
+    }
+    for o in out.iter_mut().skip(last) {
+        *o = value(last);
+    }
+    out
+}
+
+/// A gap between wheel revolutions longer than this (s) is taken as a stop.
+const STOP_GAP_S: f64 = 3.0;
+
+/// Per-step distance from reed-switch states.
+///
+/// Each rising edge is one revolution of `circumference` metres. The
+/// cumulative distance is known exactly at the edges (`k c` at edge `k`) and is
+/// interpolated linearly in time between them, which spreads each revolution
+/// over the time it took and adds no lag. A gap longer than [`STOP_GAP_S`] is a
+/// stop: the revolution before it is spread at the speed of the revolution
+/// before (slowing down), the one after at the speed of the revolution after
+/// (pulling away), and the time in between gets no distance. Before the first
+/// and after the last edge no distance is counted (at most one revolution).
+/// Returns the distances and the number of revolutions.
+pub fn distance_from_pulses(t: &[f64], pulses: &[bool], circumference: f64) -> (Vec<f64>, usize) {
+    let n = t.len();
+    let edges: Vec<usize> = (1..n).filter(|&j| pulses[j] && !pulses[j - 1]).collect();
+    // Knots of the cumulative distance curve s(t): (time, distance).
+    let mut knots: Vec<(f64, f64)> = Vec::with_capacity(edges.len() * 2);
+    for (k, &e) in edges.iter().enumerate() {
+        let te = t[e];
+        let s = k as f64 * circumference;
+        if let Some(&(tp, sp)) = knots.last()
+            && te - tp > STOP_GAP_S
+        {
+            // Stop between the previous edge and this one.
+            let before = if k >= 2 { t[edges[k - 1]] - t[edges[k - 2]] } else { STOP_GAP_S };
+            let after = edges.get(k + 1).map_or(STOP_GAP_S, |&nx| t[nx] - te);
+            let slow = before.min(STOP_GAP_S) / 2.0;
+            let start = after.min(STOP_GAP_S) / 2.0;
+            knots.push((tp + slow, sp + circumference / 2.0));
+            knots.push((te - start, sp + circumference / 2.0));
+        }
+        knots.push((te, s));
+    }
+    // Cumulative distance at each row by interpolating the knots.
+    let mut cum = vec![0.0; n];
+    let mut k = 0usize;
+    for j in 0..n {
+        let tj = t[j];
+        while k + 1 < knots.len() && knots[k + 1].0 <= tj {
+            k += 1;
+        }
+        cum[j] = if knots.is_empty() || tj <= knots[0].0 {
+            0.0
+        } else if k + 1 >= knots.len() {
+            knots[knots.len() - 1].1
+        } else {
+            let (t0, s0) = knots[k];
+            let (t1, s1) = knots[k + 1];
+            s0 + (s1 - s0) * (tj - t0) / (t1 - t0)
+        };
+    }
+    let mut d = vec![0.0; n];
+    for j in 1..n {
+        d[j] = cum[j] - cum[j - 1];
+    }
+    (d, edges.len())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pulses_at_constant_speed_give_constant_distance() {
+        // 2 m wheel at 4 m/s: an edge every 0.5 s, 100 Hz rows.
+        let t: Vec<f64> = (0..1000).map(|i| i as f64 * 0.01).collect();
+        let pulses: Vec<bool> = t.iter().map(|&ti| (ti % 0.5) < 0.05 && ti > 0.2).collect();
+        let (d, revs) = distance_from_pulses(&t, &pulses, 2.0);
+        assert_eq!(revs, 19);
+        // Between the first and last edges each step covers 4 m/s * 0.01 s.
+        for (j, dj) in d.iter().enumerate().take(940).skip(60) {
+            assert!((dj - 0.04).abs() < 1e-9, "row {j}: {dj}");
+        }
+        assert!((d.iter().sum::<f64>() - 18.0 * 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_stop_gets_no_distance() {
+        // 2 m/s (1 s per 2 m revolution), stop from 10.5 s to 30 s, then 2 m/s again.
+        let t: Vec<f64> = (0..5000).map(|i| i as f64 * 0.01).collect();
+        let edge_times: Vec<f64> = (1..=10)
+            .map(|k| k as f64)
+            .chain((0..15).map(|k| 31.0 + k as f64))
+            .collect();
+        let pulses: Vec<bool> = t
+            .iter()
+            .map(|&ti| edge_times.iter().any(|&e| ti >= e - 1e-9 && ti < e + 0.03))
+            .collect();
+        let (d, _) = distance_from_pulses(&t, &pulses, 2.0);
+        // Stopped between about 10.5 s and 30.5 s.
+        let stopped: f64 = d[1100..3000].iter().sum();
+        assert!(stopped.abs() < 1e-9, "moved {stopped} m while stopped");
+        assert!((d.iter().sum::<f64>() - 24.0 * 2.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn gaps_are_interpolated() {
+        let v = [None, Some(1.0), None, Some(3.0), None];
+        assert_eq!(fill_gaps(&v), vec![1.0, 1.0, 2.0, 3.0, 3.0]);
+    }
+}
