@@ -1,1 +1,142 @@
+//! Outputs: the reconstructed path (CSV, the shared spec's output format) and
+//! the fit report (JSON). Files are written to a temporary file beside the
+//! target and renamed into place, and never over the input log.
 
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+use crate::model::rotation::compass_deg;
+use crate::model::{Model, Trajectory};
+use crate::optimisation::{FitSettings, FitStats, Reconstruction};
+
+#[derive(Debug, Error)]
+pub enum ExportError {
+    #[error("{path}: {source}")]
+    Io {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{0}: refusing to write over the input log")]
+    WouldOverwriteInput(String),
+}
+
+/// Write through `fill` to a temporary file next to `path`, then rename it over `path`.
+/// `protect` names a file that must not be overwritten (the input log).
+pub fn write_atomically(
+    path: &Path,
+    protect: Option<&Path>,
+    fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), ExportError> {
+    let io = |source| ExportError::Io { path: path.display().to_string(), source };
+    if let Some(input) = protect
+        && let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(path))
+        && a == b
+    {
+        return Err(ExportError::WouldOverwriteInput(path.display().to_string()));
+    }
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let name = path.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp: PathBuf = dir.join(format!(".{name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut w = std::io::BufWriter::new(file);
+        fill(&mut w)?;
+        w.flush()?;
+        w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io)
+}
+
+/// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
+/// compass heading) for every row of the log.
+pub fn write_path_csv(out: &mut dyn Write, model: &Model, path: &Trajectory) -> std::io::Result<()> {
+    let sig = &model.signals;
+    writeln!(out, "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg")?;
+    for j in 0..sig.len() {
+        let p = &path.p[j];
+        let g = sig.frame.to_geodetic(p);
+        let f = path.q[j] * nalgebra::Vector3::x();
+        writeln!(
+            out,
+            "{},{:.9},{:.9},{:.3},{:.3},{:.3},{:.3},{:.2}",
+            sig.t[j],
+            g.lat_deg,
+            g.lon_deg,
+            g.alt_m,
+            p.x,
+            p.y,
+            p.z,
+            compass_deg(f.x, f.y)
+        )?;
+    }
+    Ok(())
+}
+
+/// One fitted parameter, in the units it is shown in.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ParamValue {
+    pub name: String,
+    pub value: f64,
+    pub unit: String,
+}
+
+/// The fit report written by `gyropath fit --report`.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct FitReport {
+    pub source: String,
+    pub rows: usize,
+    pub duration_s: f64,
+    pub gps_fixes: usize,
+    pub model: Vec<String>,
+    pub settings: FitSettings,
+    pub iterations_step1: usize,
+    pub iterations_step2: usize,
+    pub stats: FitStats,
+    /// Parameters per effect id.
+    pub parameters: BTreeMap<String, Vec<ParamValue>>,
+    pub warnings: Vec<String>,
+    pub elapsed_s: f64,
+}
+
+impl FitReport {
+    pub fn new(fit: &Reconstruction, elapsed_s: f64) -> Self {
+        let model = fit.model();
+        let sig = &model.signals;
+        let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
+        for ((effect, info), value) in model.param_infos().into_iter().zip(fit.params()) {
+            parameters.entry(effect).or_default().push(ParamValue {
+                name: info.name,
+                value: value * info.scale,
+                unit: info.unit.to_string(),
+            });
+        }
+        let [s1, s2] = fit.phase_iterations();
+        Self {
+            source: sig.source.clone(),
+            rows: sig.len(),
+            duration_s: sig.duration(),
+            gps_fixes: sig.fixes.len(),
+            model: model.effect_ids(),
+            settings: fit.settings().clone(),
+            iterations_step1: s1,
+            iterations_step2: s2,
+            stats: fit.stats(),
+            parameters,
+            warnings: sig.warnings.clone(),
+            elapsed_s,
+        }
+    }
+
+    /// A parameter's shown value by effect id and name.
+    pub fn value(&self, effect: &str, name: &str) -> Option<f64> {
+        self.parameters.get(effect)?.iter().find(|p| p.name == name).map(|p| p.value)
+    }
+}

@@ -55,13 +55,14 @@ fn median(v: &mut [f64]) -> f64 {
 impl StartGuess {
     pub fn from_signals(sig: &Signals) -> Result<Self, StartError> {
         let n = sig.len();
-        // Raw heading: integrate the measured rates from a level, east-facing start.
+        let rate_bias = level_bias(sig);
+        // Raw heading: integrate the rates (less the rate bias guess) from a level, east-facing start.
         let mut q = UnitQuaternion::identity();
         let mut psi = vec![0.0; n];
         let mut unwrapped = 0.0;
         let mut last = 0.0;
         for j in 1..n {
-            q *= UnitQuaternion::from_scaled_axis(sig.gyro[j] * sig.dt[j]);
+            q *= UnitQuaternion::from_scaled_axis((sig.gyro[j] - rate_bias) * sig.dt[j]);
             let f = q * Vector3::x();
             let h = f.y.atan2(f.x);
             unwrapped += wrap(h - last);
@@ -133,7 +134,7 @@ impl StartGuess {
         let heading = offset0 + da;
         let slope = slope0 + db;
         let attitude = UnitQuaternion::from_scaled_axis(Vector3::z() * heading);
-        let gyro_bias = Vector3::new(0.0, 0.0, -slope);
+        let gyro_bias = rate_bias + Vector3::new(0.0, 0.0, -slope);
         let odometer_gain = if odo_sum > 10.0 && (0.5..2.0).contains(&(chord_sum / odo_sum)) {
             chord_sum / odo_sum
         } else {
@@ -173,4 +174,45 @@ impl StartGuess {
             baro_offset,
         })
     }
+}
+
+/// Rate-bias guess before any GPS: the mean rate while standing still (odometer
+/// silent for 2 s) when the ride has at least 2 s of that, else the mean roll
+/// and pitch rates while not turning (a vehicle does not keep rolling or
+/// pitching; turns are left out because leaning couples yaw into pitch).
+fn level_bias(sig: &Signals) -> Vector3<f64> {
+    let n = sig.len();
+    let mut prefix = vec![0.0; n + 1];
+    for j in 0..n {
+        prefix[j + 1] = prefix[j] + sig.distance[j];
+    }
+    let (mut lo, mut hi) = (0usize, 0usize);
+    let mut still = Vector3::zeros();
+    let mut still_t = 0.0;
+    for j in 1..n {
+        while sig.t[j] - sig.t[lo] > 1.0 {
+            lo += 1;
+        }
+        while hi + 1 < n && sig.t[hi + 1] - sig.t[j] <= 1.0 {
+            hi += 1;
+        }
+        if sig.t[hi] - sig.t[lo] >= 1.9 && prefix[hi + 1] - prefix[lo] == 0.0 {
+            still += sig.gyro[j] * sig.dt[j];
+            still_t += sig.dt[j];
+        }
+    }
+    if still_t >= 2.0 {
+        return still / still_t;
+    }
+    let mut gz: Vec<f64> = sig.gyro.iter().map(|g| g.z).collect();
+    let centre = median(&mut gz);
+    let turn_limit = 3f64.to_radians();
+    let (mut sum, mut time) = (Vector3::zeros(), 0.0);
+    for j in 1..n {
+        if (sig.gyro[j].z - centre).abs() < turn_limit {
+            sum += sig.gyro[j] * sig.dt[j];
+            time += sig.dt[j];
+        }
+    }
+    if time > 0.0 { Vector3::new(sum.x / time, sum.y / time, 0.0) } else { Vector3::zeros() }
 }

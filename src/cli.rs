@@ -1,0 +1,278 @@
+//! The command line: `gyropath fit` and `gyropath simulate`.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use gyropath::export::{FitReport, write_atomically, write_path_csv};
+use gyropath::loading;
+use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
+use gyropath::optimisation::{FitSettings, IterationReport, Method, Phase, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::{self, SimConfig};
+
+#[derive(Debug, Parser)]
+#[command(name = "gyropath", version, about = "Reconstruct a ride's path from gyro, odometer and GPS by estimating the gyro bias")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Option<Command>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Fit the model to a ride log and write the reconstructed path.
+    Fit(FitArgs),
+    /// Write a simulated bicycle ride (and its true path).
+    Simulate(SimulateArgs),
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum MethodArg {
+    Lm,
+    Gd,
+}
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub enum IncrementArg {
+    Exact,
+    SmallAngle,
+}
+
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// Ride log (CSV, see the ride-log format).
+    pub ride: PathBuf,
+    /// Effects of the model, comma separated (`paper` = the paper's five).
+    #[arg(long, default_value = "paper")]
+    pub effects: String,
+    /// Length of a bias segment (s).
+    #[arg(long, default_value_t = 5.0)]
+    pub segment_s: f64,
+    /// Step-2 optimiser.
+    #[arg(long, value_enum, default_value_t = MethodArg::Lm)]
+    pub method: MethodArg,
+    /// Gradient-descent step size gamma.
+    #[arg(long, default_value_t = 1e-6)]
+    pub step_size: f64,
+    /// Initial Levenberg-Marquardt damping lambda.
+    #[arg(long, default_value_t = 1e-3)]
+    pub damping: f64,
+    /// Iteration limit for each step.
+    #[arg(long, default_value_t = 200)]
+    pub max_iter: usize,
+    /// Random-walk density of the segment-bias prior in deg/s/sqrt(s), or `none` for the paper's model without prior.
+    #[arg(long, default_value_t = DEFAULT_BIAS_WALK.to_string())]
+    pub bias_walk: String,
+    /// GPS horizontal noise (m), weights the horizontal residuals.
+    #[arg(long, default_value_t = 3.0)]
+    pub gps_sigma: f64,
+    /// Increment map: exact exponential or the paper's small-angle quaternion.
+    #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
+    pub increment: IncrementArg,
+    /// Write the reconstructed path here (CSV: t_s,lat_deg,lon_deg,alt_m,...).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the fit report here (JSON).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct SimulateArgs {
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Ride length (s).
+    #[arg(long, default_value_t = 600.0)]
+    pub duration: f64,
+    /// Logging rate (Hz).
+    #[arg(long, default_value_t = 100.0)]
+    pub rate: f64,
+    /// Hidden effects, comma separated: gyro_scale, gps_lag, mount_misalignment, gyro_bias_channel:temp_c, gps_outliers.
+    #[arg(long, default_value = "")]
+    pub hidden: String,
+    /// Log cumulative distance (odo_m) instead of wheel pulses.
+    #[arg(long)]
+    pub odometer: bool,
+    /// No GPS outages.
+    #[arg(long)]
+    pub no_outages: bool,
+    /// Where to write the ride log.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Where to write the true path (t_s,lat_deg,lon_deg,alt_m).
+    #[arg(long)]
+    pub truth: Option<PathBuf>,
+    /// Where to write the true parameters (JSON).
+    #[arg(long)]
+    pub truth_params: Option<PathBuf>,
+}
+
+fn split_list(s: &str) -> Vec<String> {
+    s.split(',').map(str::trim).filter(|s| !s.is_empty()).map(String::from).collect()
+}
+
+impl FitArgs {
+    pub fn settings(&self) -> Result<FitSettings> {
+        let walk = match self.bias_walk.trim() {
+            "none" | "off" => None,
+            v => Some(v.parse::<f64>().with_context(|| format!("--bias-walk: '{v}' is not a number or 'none'"))?),
+        };
+        Ok(FitSettings {
+            model: ModelSpec {
+                effects: split_list(&self.effects),
+                segment_s: self.segment_s,
+                bias_walk_dps_sqrt_s: walk,
+                sigma_horizontal_m: self.gps_sigma,
+                increment: match self.increment {
+                    IncrementArg::Exact => Increment::Exact,
+                    IncrementArg::SmallAngle => Increment::SmallAngle,
+                },
+                ..ModelSpec::default()
+            },
+            method: match self.method {
+                MethodArg::Lm => Method::Lm,
+                MethodArg::Gd => Method::Gd,
+            },
+            step_size: self.step_size,
+            damping: self.damping,
+            max_iter: self.max_iter,
+            ..FitSettings::default()
+        })
+    }
+}
+
+/// Load a log and derive its signals.
+pub fn load_signals(path: &Path) -> Result<Signals> {
+    let log = loading::load_file(path)?;
+    Ok(Signals::from_log(&log)?)
+}
+
+fn phase_name(p: Phase) -> &'static str {
+    match p {
+        Phase::Step1 => "step 1",
+        Phase::Step2 => "step 2",
+        Phase::Done => "done",
+    }
+}
+
+fn progress_line(r: &IterationReport) -> String {
+    format!(
+        "{:>4} {} {:<2} cost {:>12.4} rms {:>7.3} m {}{}",
+        r.iteration,
+        phase_name(r.phase),
+        match r.method {
+            Method::Lm => "lm",
+            Method::Gd => "gd",
+        },
+        r.cost,
+        r.rms_horizontal_m,
+        if r.accepted { "" } else { "(step rejected) " },
+        if r.phase_finished { "(converged)" } else { "" }
+    )
+}
+
+pub fn fit(args: &FitArgs) -> Result<()> {
+    let started = Instant::now();
+    let settings = args.settings()?;
+    let signals = Arc::new(load_signals(&args.ride)?);
+    if !args.quiet {
+        for w in &signals.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    let mut fit = Reconstruction::new(signals, settings)?;
+    let terminal = std::io::stderr().is_terminal() && !args.quiet;
+    let bar = terminal.then(|| {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        bar
+    });
+    let quiet = args.quiet;
+    fit.run(&mut |_: &Reconstruction, r: &IterationReport| {
+        let line = progress_line(r);
+        match &bar {
+            Some(b) => b.set_message(line),
+            None if !quiet => eprintln!("{line}"),
+            None => {}
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
+    if let Some(out) = &args.out {
+        let path = fit.trajectory();
+        write_atomically(out, Some(&args.ride), |w| write_path_csv(w, fit.model(), &path))?;
+    }
+    if let Some(rep) = &args.report {
+        write_atomically(rep, Some(&args.ride), |w| {
+            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
+            writeln!(w)
+        })?;
+    }
+    if !args.quiet {
+        print_summary(&report);
+    }
+    Ok(())
+}
+
+fn print_summary(r: &FitReport) {
+    println!("ride      {} ({} rows, {:.0} s, {} GPS fixes)", r.source, r.rows, r.duration_s, r.gps_fixes);
+    println!("model     {}", r.model.join(", "));
+    println!("iters     step 1: {}, step 2: {}", r.iterations_step1, r.iterations_step2);
+    println!("cost      {:.4}", r.stats.cost);
+    println!("rms       horizontal {:.3} m", r.stats.rms_horizontal_m);
+    if let Some(v) = r.stats.rms_gps_up_m {
+        println!("          GPS altitude {v:.3} m");
+    }
+    if let Some(v) = r.stats.rms_baro_up_m {
+        println!("          barometer {v:.3} m");
+    }
+    for (effect, values) in &r.parameters {
+        if effect == "gyro_bias_segments" {
+            let n = values.len() / 3;
+            println!("{effect}: {n} segments (see --report)");
+            continue;
+        }
+        let list: Vec<String> = values.iter().map(|p| format!("{} {:.5} {}", p.name, p.value, p.unit)).collect();
+        println!("{effect}: {}", list.join(", "));
+    }
+    println!("time      {:.2} s", r.elapsed_s);
+}
+
+pub fn simulate(args: &SimulateArgs) -> Result<()> {
+    let config = SimConfig {
+        seed: args.seed,
+        duration_s: args.duration,
+        rate_hz: args.rate,
+        hidden: split_list(&args.hidden),
+        odometer: args.odometer,
+        outages: !args.no_outages,
+    };
+    let ride = simulation::simulate(&config)?;
+    write_atomically(&args.out, None, |w| w.write_all(ride.log_csv.as_bytes()))?;
+    if let Some(t) = &args.truth {
+        write_atomically(t, None, |w| w.write_all(ride.truth_csv.as_bytes()))?;
+    }
+    if let Some(t) = &args.truth_params {
+        write_atomically(t, None, |w| {
+            serde_json::to_writer_pretty(&mut *w, &ride.truth).map_err(std::io::Error::other)?;
+            writeln!(w)
+        })?;
+    }
+    eprintln!(
+        "wrote {} ({:.0} s, {:.0} m, hidden: {})",
+        args.out.display(),
+        ride.truth.duration_s,
+        ride.truth.distance_m,
+        if config.hidden.is_empty() { "none".into() } else { config.hidden.join(", ") }
+    );
+    Ok(())
+}
