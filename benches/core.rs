@@ -1,1 +1,65 @@
-fn main() {}
+//! Speed of the core on simulated 100 Hz rides with 1 Hz GPS and 5 s segments.
+//! `cargo bench --bench core`; numbers are in the README.
+
+use std::hint::black_box;
+use std::sync::Arc;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use gyropath::loading::parse;
+use gyropath::model::{Model, ModelSpec};
+use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::{SimConfig, simulate};
+
+fn ride(minutes: f64) -> (String, Arc<Signals>) {
+    let sim = simulate(&SimConfig { seed: 3, duration_s: minutes * 60.0, ..SimConfig::default() }).expect("simulate");
+    let sig = Signals::from_log(&parse(sim.log_csv.as_bytes(), "bench").expect("parse")).expect("signals");
+    (sim.log_csv, Arc::new(sig))
+}
+
+fn bench(c: &mut Criterion) {
+    let mut g = c.benchmark_group("core");
+    g.sample_size(10);
+    for minutes in [15.0, 30.0, 60.0] {
+        let (csv, sig) = ride(minutes);
+        let label = format!("{minutes:.0}min");
+        g.bench_function(format!("load/{label}"), |b| {
+            b.iter(|| Signals::from_log(&parse(black_box(csv.as_bytes()), "bench").unwrap()).unwrap())
+        });
+        let model = Model::new(sig.clone(), ModelSpec::default()).unwrap();
+        let theta = model.initial_params();
+        g.bench_function(format!("cost/{label}"), |b| b.iter(|| model.cost(black_box(&theta))));
+        g.bench_function(format!("gradient/{label}"), |b| b.iter(|| model.gradient(black_box(&theta))));
+        let free = vec![true; model.n_params()];
+        g.bench_function(format!("normal_equations/{label}"), |b| b.iter(|| model.normal_equations(black_box(&theta), &free)));
+        g.bench_function(format!("fit/{label}"), |b| {
+            b.iter(|| {
+                let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+                while fit.iterate().is_some() {}
+                fit.stats().rms_horizontal_m
+            })
+        });
+    }
+    // The naive gradient: one finite difference per parameter (what the O(N)
+    // sweep replaces), on the 15-minute ride, for 20 parameters -> scale by P/20.
+    let (_, sig) = ride(15.0);
+    let model = Model::new(sig, ModelSpec::default()).unwrap();
+    let theta = model.initial_params();
+    g.bench_function("naive_gradient_20_params/15min", |b| {
+        b.iter(|| {
+            let mut t = theta.clone();
+            (0..20)
+                .map(|i| {
+                    t[i] += 1e-6;
+                    let c = model.cost(&t);
+                    t[i] -= 1e-6;
+                    c
+                })
+                .sum::<f64>()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

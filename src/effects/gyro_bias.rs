@@ -44,6 +44,20 @@ impl Effect for GyroBias {
     fn gyro_partials(&self, _p: &[f64], _j: usize, _omega: &Vector3<f64>) -> GyroPartials {
         GyroPartials::bias(0)
     }
+
+    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+        let b = Vector3::new(p[0], p[1], p[2]);
+        for w in rates.iter_mut().skip(1) {
+            *w -= b;
+        }
+    }
+
+    fn gyro_backward(&self, _p: &[f64], _omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+        let total: Vector3<f64> = grad.iter().skip(1).sum();
+        for a in 0..3 {
+            grad_p[a] -= total[a];
+        }
+    }
 }
 
 #[cfg(test)]
@@ -54,5 +68,6 @@ mod tests {
     fn partials_match_finite_differences() {
         let p = [0.01, -0.02, 0.03];
         crate::effects::testing::check_gyro_partials(&GyroBias, &p, 5, Vector3::new(0.1, 0.2, -0.3));
+        crate::effects::testing::check_batches(&GyroBias, &p, 500);
     }
 }

@@ -23,6 +23,8 @@ pub struct GyroBiasSegments {
     edges: Vec<f64>,
     /// `1 / (sigma_w sqrt(T))`, or 0 without a prior.
     prior_weight: f64,
+    /// First and last step of each segment (inclusive); empty segments get `None`.
+    steps: Vec<Option<(usize, usize)>>,
 }
 
 impl GyroBiasSegments {
@@ -48,7 +50,7 @@ impl GyroBiasSegments {
         let t0 = signals.t[0];
         let duration = signals.duration();
         let n = ((duration / segment_s).ceil() as usize).max(1);
-        let segment_of = (0..signals.len())
+        let segment_of: Vec<u32> = (0..signals.len())
             .map(|j| {
                 let mid = if j == 0 {
                     signals.t[0]
@@ -60,6 +62,11 @@ impl GyroBiasSegments {
             .collect();
         let mut edges: Vec<f64> = (0..n).map(|s| t0 + s as f64 * segment_s).collect();
         edges.push(t0 + duration);
+        let mut steps: Vec<Option<(usize, usize)>> = vec![None; n];
+        for (j, &s) in segment_of.iter().enumerate().skip(1) {
+            let e = &mut steps[s as usize];
+            *e = Some(e.map_or((j, j), |(a, _)| (a, j)));
+        }
         let prior_weight = bias_walk_dps_sqrt_s
             .map_or(0.0, |w| 1.0 / (w / DEG_PER_RAD * segment_s.sqrt()));
         Ok(Self {
@@ -67,6 +74,7 @@ impl GyroBiasSegments {
             segment_of,
             edges,
             prior_weight,
+            steps,
         })
     }
 
@@ -126,6 +134,22 @@ impl Effect for GyroBiasSegments {
         GyroPartials::bias(3 * self.segment_of[j] as usize)
     }
 
+    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+        for (w, &s) in rates.iter_mut().zip(&self.segment_of).skip(1) {
+            let s = 3 * s as usize;
+            *w -= Vector3::new(p[s], p[s + 1], p[s + 2]);
+        }
+    }
+
+    fn gyro_backward(&self, _p: &[f64], _omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+        for (g, &s) in grad.iter().zip(&self.segment_of).skip(1) {
+            let s = 3 * s as usize;
+            grad_p[s] -= g.x;
+            grad_p[s + 1] -= g.y;
+            grad_p[s + 2] -= g.z;
+        }
+    }
+
     fn n_prior(&self) -> usize {
         if self.prior_weight > 0.0 {
             3 * (self.n_segments() - 1)
@@ -147,6 +171,11 @@ impl Effect for GyroBiasSegments {
                 out.entries.push((row, 3 * (s - 1) + a, -w));
             }
         }
+    }
+
+    fn param_steps(&self, i: usize) -> Option<(usize, usize)> {
+        // A segment with no step (shorter than a sample) acts nowhere: step range past the end.
+        Some(self.steps[i / 3].unwrap_or((usize::MAX, usize::MAX)))
     }
 
     fn segment_edges(&self) -> Option<&[f64]> {
@@ -198,6 +227,7 @@ mod tests {
         assert_eq!(e.segment_of(sig.len() - 1), 2);
         let p: Vec<f64> = (0..9).map(|i| i as f64 * 0.01).collect();
         crate::effects::testing::check_gyro_partials(&e, &p, 700, Vector3::new(0.1, 0.2, 0.3));
+        crate::effects::testing::check_batches(&e, &p, sig.len());
     }
 
     #[test]

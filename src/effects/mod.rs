@@ -163,6 +163,25 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         }
     }
 
+    /// [`gyro`](Effect::gyro) over every step at once (`rates[j]` in, corrected out).
+    /// Override with a tight loop where it matters: the cost sweep calls it once per evaluation.
+    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+        for (j, w) in rates.iter_mut().enumerate() {
+            *w = self.gyro(p, j, *w);
+        }
+    }
+    /// Back-propagate through the gyro site over every step: `grad[j]` holds
+    /// `dC/d omega_out` and becomes `dC/d omega_in`; parameter gradients are added to `grad_p`.
+    fn gyro_backward(&self, p: &[f64], omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+        for (j, g) in grad.iter_mut().enumerate().skip(1) {
+            let part = self.gyro_partials(p, j, &omega_in[j]);
+            for &(c, col) in part.params.as_slice() {
+                grad_p[c] += col.dot(g);
+            }
+            *g = part.d_in.transpose() * *g;
+        }
+    }
+
     fn acts_on_distance(&self) -> bool {
         false
     }
@@ -173,6 +192,23 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         DistancePartials {
             d_in: 1.0,
             params: Columns::default(),
+        }
+    }
+
+    /// [`distance`](Effect::distance) over every step at once.
+    fn distance_batch(&self, p: &[f64], d: &mut [f64]) {
+        for (j, x) in d.iter_mut().enumerate() {
+            *x = self.distance(p, j, *x);
+        }
+    }
+    /// Back-propagate through the distance site (see [`gyro_backward`](Effect::gyro_backward)).
+    fn distance_backward(&self, p: &[f64], d_in: &[f64], grad: &mut [f64], grad_p: &mut [f64]) {
+        for (j, g) in grad.iter_mut().enumerate().skip(1) {
+            let part = self.distance_partials(p, j, d_in[j]);
+            for &(c, v) in part.params.as_slice() {
+                grad_p[c] += v * *g;
+            }
+            *g *= part.d_in;
         }
     }
 
@@ -199,6 +235,13 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     /// Parameters for this effect given another version of it (e.g. the same
     /// effect on a different segment length). `None` if it cannot map them.
     fn carry_over(&self, _other: &dyn Effect, _other_p: &[f64]) -> Option<Vec<f64>> {
+        None
+    }
+
+    /// First and last step (inclusive) at which local parameter `i` acts, for
+    /// parameters that act only on a stretch of the ride (segment biases).
+    /// `None`: it acts everywhere. Lets LM build `J^T J` from moments.
+    fn param_steps(&self, _i: usize) -> Option<(usize, usize)> {
         None
     }
 
@@ -281,6 +324,34 @@ pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Ef
 pub(crate) mod testing {
     //! Finite-difference checks shared by the effect tests.
     use super::*;
+
+    /// Check that the batch forms agree with the per-step forms over `n` steps.
+    pub fn check_batches(effect: &dyn Effect, p: &[f64], n: usize) {
+        let rates: Vec<Vector3<f64>> = (0..n).map(|j| Vector3::new(0.1, -0.2, 0.3) * (j as f64 * 0.01).sin()).collect();
+        let mut batch = rates.clone();
+        effect.gyro_batch(p, &mut batch);
+        let mut grad: Vec<Vector3<f64>> = (0..n).map(|j| Vector3::new(1.0, 2.0, -1.0) * (j as f64 * 0.03).cos()).collect();
+        let mut gp = vec![0.0; p.len()];
+        let mut gp_ref = vec![0.0; p.len()];
+        let grad_ref: Vec<Vector3<f64>> = grad.iter().enumerate().map(|(j, g)| {
+            if j == 0 {
+                return *g;
+            }
+            let part = effect.gyro_partials(p, j, &rates[j]);
+            for &(c, col) in part.params.as_slice() {
+                gp_ref[c] += col.dot(g);
+            }
+            part.d_in.transpose() * g
+        }).collect();
+        effect.gyro_backward(p, &rates, &mut grad, &mut gp);
+        for j in 1..n {
+            assert!((batch[j] - effect.gyro(p, j, rates[j])).norm() < 1e-12, "batch forward at {j}");
+            assert!((grad[j] - grad_ref[j]).norm() < 1e-9, "batch backward at {j}");
+        }
+        for (a, b) in gp.iter().zip(&gp_ref) {
+            assert!((a - b).abs() < 1e-9 * (1.0 + b.abs()), "parameter gradient {a} vs {b}");
+        }
+    }
 
     /// Check `gyro_partials` of `effect` against central differences at step `j`.
     pub fn check_gyro_partials(effect: &dyn Effect, p: &[f64], j: usize, omega: Vector3<f64>) {

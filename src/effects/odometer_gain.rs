@@ -35,4 +35,17 @@ impl Effect for OdometerGain {
         params.push(0, d);
         DistancePartials { d_in: p[0], params }
     }
+
+    fn distance_batch(&self, p: &[f64], d: &mut [f64]) {
+        for x in d.iter_mut() {
+            *x *= p[0];
+        }
+    }
+
+    fn distance_backward(&self, p: &[f64], d_in: &[f64], grad: &mut [f64], grad_p: &mut [f64]) {
+        for (g, &x) in grad.iter_mut().zip(d_in).skip(1) {
+            grad_p[0] += x * *g;
+            *g *= p[0];
+        }
+    }
 }

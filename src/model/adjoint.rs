@@ -34,8 +34,9 @@ impl Model {
         let mut k = obs.len();
         let mut a = Vector3::zeros();
         let mut b = Vector3::zeros();
-        let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
-        let mut dchain = vec![0.0; self.distance_chain.len() + 1];
+        // dC/d omega_j and dC/d d_j of the corrected signals, then back through the chains.
+        let mut g_rate = vec![Vector3::zeros(); n];
+        let mut g_dist = vec![0.0; n];
         let mut baro_grad = 0.0;
 
         // Add the residual gradient of every observation on `row` into `a`.
@@ -56,42 +57,24 @@ impl Model {
         for j in (1..n).rev() {
             take_row(j, &mut a, &mut k, &mut cost);
             let rot = path.q[j].to_rotation_matrix();
-            let dir = rot * Vector3::x();
+            let dir = super::rotation::forward(&path.q[j]);
             b += (dir * path.d[j]).cross(&a);
-            if !self.gyro_chain.is_empty() {
-                // d C / d omega_j = dt_j J_j^T R_j^T B_j, then back through the gyro chain.
-                let jr = self.spec.increment.right_jacobian(&path.theta[j]);
-                let mut g = jr.transpose() * (rot.transpose() * b) * sig.dt[j];
-                chain[0] = sig.gyro[j];
-                for (i, &e) in self.gyro_chain.iter().enumerate() {
-                    chain[i + 1] = self.effects[e].gyro(self.params_of(e, theta), j, chain[i]);
-                }
-                for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
-                    let part = self.effects[e].gyro_partials(self.params_of(e, theta), j, &chain[i]);
-                    let off = self.offsets[e];
-                    for &(c, col) in part.params.as_slice() {
-                        grad[off + c] += col.dot(&g);
-                    }
-                    g = part.d_in.transpose() * g;
-                }
-            }
-            if !self.distance_chain.is_empty() {
-                let mut g = a.dot(&dir);
-                dchain[0] = sig.distance[j];
-                for (i, &e) in self.distance_chain.iter().enumerate() {
-                    dchain[i + 1] = self.effects[e].distance(self.params_of(e, theta), j, dchain[i]);
-                }
-                for (i, &e) in self.distance_chain.iter().enumerate().rev() {
-                    let part = self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
-                    let off = self.offsets[e];
-                    for &(c, v) in part.params.as_slice() {
-                        grad[off + c] += v * g;
-                    }
-                    g *= part.d_in;
-                }
-            }
+            // d C / d omega_j = dt_j J_j^T R_j^T B_j.
+            let jr = self.spec.increment.right_jacobian(&path.theta[j]);
+            g_rate[j] = jr.transpose() * (rot.transpose() * b) * sig.dt[j];
+            g_dist[j] = a.dot(&dir);
         }
         take_row(0, &mut a, &mut k, &mut cost);
+        let (_, rate_inputs) = self.corrected_rates(theta, true);
+        for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
+            let r = self.range(e);
+            self.effects[e].gyro_backward(self.params_of(e, theta), &rate_inputs[i], &mut g_rate, &mut grad[r]);
+        }
+        let (_, dist_inputs) = self.corrected_distances(theta, true);
+        for (i, &e) in self.distance_chain.iter().enumerate().rev() {
+            let r = self.range(e);
+            self.effects[e].distance_backward(self.params_of(e, theta), &dist_inputs[i], &mut g_dist, &mut grad[r]);
+        }
 
         if let Some(e) = self.position {
             for i in 0..3 {

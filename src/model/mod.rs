@@ -18,6 +18,7 @@
 
 mod adjoint;
 mod jacobian;
+mod normal;
 pub mod rotation;
 mod start;
 mod sweep;
@@ -25,7 +26,8 @@ mod sweep;
 pub use rotation::Increment;
 pub use start::{StartError, StartGuess};
 pub use jacobian::Linearisation;
-pub use sweep::Trajectory;
+pub use normal::NormalEquations;
+pub use sweep::{Evaluation, Trajectory};
 
 use std::sync::Arc;
 

@@ -28,7 +28,7 @@ impl Increment {
     #[inline]
     pub fn quaternion(self, theta: &Vector3<f64>) -> UnitQuaternion<f64> {
         match self {
-            Increment::Exact => UnitQuaternion::from_scaled_axis(*theta),
+            Increment::Exact => exp_quaternion(theta),
             Increment::SmallAngle => UnitQuaternion::from_quaternion(Quaternion::new(
                 1.0,
                 0.5 * theta.x,
@@ -65,6 +65,28 @@ impl Increment {
     }
 }
 
+/// `Exp(theta)` as a quaternion, `[cos(n/2), sin(n/2) theta/n]`; for the small
+/// angles of one gyro step (`n < 0.03` rad) by its Taylor series, which is
+/// exact to rounding there and needs no square root, sine or cosine.
+#[inline]
+pub fn exp_quaternion(theta: &Vector3<f64>) -> UnitQuaternion<f64> {
+    let n2 = theta.norm_squared();
+    if n2 < 1e-3 {
+        let w = 1.0 - n2 / 8.0 + n2 * n2 / 384.0 - n2 * n2 * n2 / 46080.0;
+        let s = 0.5 - n2 / 48.0 + n2 * n2 / 3840.0 - n2 * n2 * n2 / 645_120.0;
+        UnitQuaternion::new_unchecked(Quaternion::new(w, s * theta.x, s * theta.y, s * theta.z))
+    } else {
+        UnitQuaternion::from_scaled_axis(*theta)
+    }
+}
+
+/// The forward (x) axis of the sensor frame in the world, the first column of `R(q)`.
+#[inline]
+pub fn forward(q: &UnitQuaternion<f64>) -> Vector3<f64> {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    Vector3::new(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y))
+}
+
 /// The cross-product matrix, `skew(a) b = a x b`.
 #[inline]
 pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
@@ -76,10 +98,10 @@ pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
 #[inline]
 pub fn right_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
     let n2 = phi.norm_squared();
-    let (a, b) = if n2 < 1e-6 {
+    let (a, b) = if n2 < 1e-2 {
         (
-            0.5 - n2 / 24.0 + n2 * n2 / 720.0,
-            1.0 / 6.0 - n2 / 120.0 + n2 * n2 / 5040.0,
+            0.5 - n2 / 24.0 + n2 * n2 / 720.0 - n2 * n2 * n2 / 40320.0,
+            1.0 / 6.0 - n2 / 120.0 + n2 * n2 / 5040.0 - n2 * n2 * n2 / 362_880.0,
         )
     } else {
         let n = n2.sqrt();
@@ -117,6 +139,16 @@ mod tests {
     /// Log of a unit quaternion as a rotation vector.
     fn log(q: &UnitQuaternion<f64>) -> Vector3<f64> {
         q.scaled_axis()
+    }
+
+    #[test]
+    fn series_exponential_and_forward_axis_are_exact() {
+        for theta in random_vectors().into_iter().chain([Vector3::new(0.01, -0.02, 0.015)]) {
+            let a = exp_quaternion(&theta);
+            let b = UnitQuaternion::from_scaled_axis(theta);
+            assert!((a.coords - b.coords).norm() < 1e-15, "{theta}");
+            assert!((forward(&b) - b * Vector3::x()).norm() < 1e-15);
+        }
     }
 
     #[test]

@@ -19,24 +19,31 @@ pub struct Trajectory {
 }
 
 impl Model {
-    /// Corrected gyro rate of step `j` (the gyro chain).
-    #[inline]
-    pub(crate) fn rate(&self, theta: &[f64], j: usize) -> Vector3<f64> {
-        let mut w = self.signals.gyro[j];
+    /// Corrected rates (rad/s) of every step: the gyro chain applied in batch.
+    /// With `keep_inputs`, also the input of every gyro effect (for back-propagation).
+    pub(crate) fn corrected_rates(&self, theta: &[f64], keep_inputs: bool) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
+        let mut rates = self.signals.gyro.clone();
+        let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
-            w = self.effects[e].gyro(self.params_of(e, theta), j, w);
+            if keep_inputs {
+                inputs.push(rates.clone());
+            }
+            self.effects[e].gyro_batch(self.params_of(e, theta), &mut rates);
         }
-        w
+        (rates, inputs)
     }
 
-    /// Corrected distance of step `j` (the distance chain).
-    #[inline]
-    pub(crate) fn step_distance(&self, theta: &[f64], j: usize) -> f64 {
-        let mut d = self.signals.distance[j];
+    /// Corrected distance of every step, with the inputs of every distance effect if asked.
+    pub(crate) fn corrected_distances(&self, theta: &[f64], keep_inputs: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
+        let mut d = self.signals.distance.clone();
+        let mut inputs = Vec::new();
         for &e in &self.distance_chain {
-            d = self.effects[e].distance(self.params_of(e, theta), j, d);
+            if keep_inputs {
+                inputs.push(d.clone());
+            }
+            self.effects[e].distance_batch(self.params_of(e, theta), &mut d);
         }
-        d
+        (d, inputs)
     }
 
     /// Run eq. 1-4 over the ride, calling `visit(j, q_j, p_j, theta_j, d_j)` at every row.
@@ -50,11 +57,13 @@ impl Model {
         let inc = self.spec.increment;
         visit(0, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
+        let (rates, _) = self.corrected_rates(theta, false);
+        let (dist, _) = self.corrected_distances(theta, false);
         for j in 1..sig.len() {
-            let th = self.rate(theta, j) * sig.dt[j];
+            let th = rates[j] * sig.dt[j];
             q *= inc.quaternion(&th);
-            let d = self.step_distance(theta, j);
-            p += q * Vector3::x() * d;
+            let d = dist[j];
+            p += super::rotation::forward(&q) * d;
             visit(j, &q, &p, &th, d);
         }
     }
@@ -99,24 +108,43 @@ impl Model {
 
     /// The cost `C = sum r^2` (eq. 7 with weights, plus priors) without storing the path.
     pub fn cost(&self, theta: &[f64]) -> f64 {
+        self.evaluate(theta).cost
+    }
+
+    /// Cost and the unweighted squared misfits per kind of row, in one sweep.
+    pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
         let baro = self.baro_offset(theta);
         let obs = &self.observations;
         let mut k = 0;
-        let mut c = 0.0;
+        let mut ev = Evaluation::default();
         self.sweep(theta, |j, _, p, _, _| {
             while k < obs.len() && obs[k].row == j {
                 let o = &obs[k];
                 let target = if o.baro { o.target + baro } else { o.target };
-                let r = o.w * (p[o.axis] - target);
-                c += r * r;
+                let metres = p[o.axis] - target;
+                let r = o.w * metres;
+                ev.cost += r * r;
+                let slot = match (o.axis, o.baro) {
+                    (2, true) => 2,
+                    (2, false) => 1,
+                    _ => 0,
+                };
+                ev.sum_sq_m[slot] += metres * metres;
+                ev.count[slot] += 1;
                 k += 1;
             }
         });
-        c + self
-            .prior_rows(theta)
-            .residuals
-            .iter()
-            .map(|r| r * r)
-            .sum::<f64>()
+        ev.cost += self.prior_rows(theta).residuals.iter().map(|r| r * r).sum::<f64>();
+        ev
     }
+}
+
+/// What one cheap sweep tells about a parameter vector.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Evaluation {
+    pub cost: f64,
+    /// Sum of squared misfits (m^2): horizontal components, GPS up, barometric up.
+    pub sum_sq_m: [f64; 3],
+    /// Rows of each kind.
+    pub count: [usize; 3],
 }

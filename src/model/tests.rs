@@ -92,3 +92,28 @@ fn jacobian_of_a_subset_is_the_matching_columns() {
         assert_eq!(sub.jacobian.column(c), all.jacobian.column(i));
     }
 }
+
+#[test]
+fn moment_normal_equations_equal_the_dense_ones() {
+    for walk in [None, Some(0.01)] {
+        let m = model(Increment::Exact, walk);
+        let p = perturbed(&m);
+        for roles in [
+            vec![effects::Role::Global, effects::Role::Segments],
+            vec![effects::Role::Segments],
+            vec![effects::Role::Global, effects::Role::Step1Only],
+        ] {
+            let free = m.free_mask(&roles);
+            let lin = m.linearise(&p, &free);
+            let jt = lin.jacobian.transpose();
+            let a = &jt * &lin.jacobian;
+            let g = &jt * &lin.residuals;
+            let ne = m.normal_equations(&p, &free);
+            assert_eq!(ne.columns, lin.columns);
+            assert!((ne.cost - lin.cost).abs() < 1e-9 * lin.cost);
+            let scale = a.amax();
+            assert!((&ne.a - &a).amax() < 1e-9 * scale, "{roles:?}: A differs by {}", (&ne.a - &a).amax());
+            assert!((&ne.g - &g).amax() < 1e-9 * g.amax().max(1.0), "{roles:?}: g differs");
+        }
+    }
+}

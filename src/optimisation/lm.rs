@@ -69,23 +69,21 @@ pub fn iterate(
     state: &mut LmState,
     tolerance: f64,
 ) -> StepOutcome {
-    let lin = model.linearise(theta, free);
-    let cost = lin.cost;
-    let jt = lin.jacobian.transpose();
-    let a = &jt * &lin.jacobian;
-    let g = &jt * &lin.residuals;
-    let neg_g = -&g;
+    let ne = model.normal_equations(theta, free);
+    let cost = ne.cost;
+    let (a, g) = (&ne.a, &ne.g);
+    let neg_g = -g;
     let mut evaluations = 0;
     let mut trial = theta.to_vec();
     for _ in 0..MAX_TRIES {
-        if let Some(delta) = damped_solve(&a, &neg_g, state.lambda) {
-            for (c, &i) in lin.columns.iter().enumerate() {
+        if let Some(delta) = damped_solve(a, &neg_g, state.lambda) {
+            for (c, &i) in ne.columns.iter().enumerate() {
                 trial[i] = theta[i] + delta[c];
             }
             let new_cost = model.cost(&trial);
             evaluations += 1;
             if new_cost.is_finite() && new_cost < cost {
-                let predicted = -(2.0 * delta.dot(&g) + delta.dot(&(&a * &delta)));
+                let predicted = -(2.0 * delta.dot(g) + delta.dot(&(a * &delta)));
                 let rho = if predicted > 0.0 { (cost - new_cost) / predicted } else { 0.0 };
                 state.lambda = (state.lambda * (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3)))
                     .clamp(LAMBDA_MIN, LAMBDA_MAX);

@@ -17,7 +17,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::effects::Role;
-use crate::model::{Model, ModelError, ModelSpec, RowKind, Trajectory};
+use crate::model::{Model, ModelError, ModelSpec, Trajectory};
 use crate::signals::Signals;
 
 pub use gd::GdState;
@@ -139,27 +139,12 @@ pub struct FitStats {
 
 impl FitStats {
     pub fn of(model: &Model, theta: &[f64]) -> Self {
-        let r = model.residuals(theta);
-        let kinds = model.row_kinds();
-        let obs = &model.observations;
-        let mut sums = [0.0; 3];
-        let mut counts = [0usize; 3];
-        for (i, kind) in kinds.iter().enumerate() {
-            let slot = match kind {
-                RowKind::Horizontal => 0,
-                RowKind::GpsUp => 1,
-                RowKind::BaroUp => 2,
-                RowKind::Prior => continue,
-            };
-            let metres = r[i] / obs[i].w;
-            sums[slot] += metres * metres;
-            counts[slot] += 1;
-        }
-        let rms = |s: usize| (counts[s] > 0).then(|| (sums[s] / counts[s] as f64).sqrt());
+        let ev = model.evaluate(theta);
+        let rms = |s: usize| (ev.count[s] > 0).then(|| (ev.sum_sq_m[s] / ev.count[s] as f64).sqrt());
         Self {
-            cost: r.iter().map(|v| v * v).sum(),
+            cost: ev.cost,
             // Two horizontal rows per fix: RMS of the 2-D distance.
-            rms_horizontal_m: (sums[0] / (counts[0] / 2).max(1) as f64).sqrt(),
+            rms_horizontal_m: (ev.sum_sq_m[0] / (ev.count[0] / 2).max(1) as f64).sqrt(),
             rms_gps_up_m: rms(1),
             rms_baro_up_m: rms(2),
         }

@@ -388,3 +388,51 @@ mod tests {
         assert!(f.dot(&course) > 2f64.to_radians().cos(), "{f} vs {course}");
     }
 }
+
+/// Horizontal errors of a reconstructed path against the simulator's truth.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct TruthErrors {
+    /// Path - truth at the rows with a GPS fix, RMS (m).
+    pub path_at_fixes_m: f64,
+    /// GPS fix - truth, RMS (m): what the path has to beat.
+    pub fixes_m: f64,
+    /// Path - truth over the rows inside GPS outages, RMS (m).
+    pub path_in_outages_m: Option<f64>,
+    /// Path - truth over every row, RMS (m).
+    pub path_all_m: f64,
+}
+
+impl SimulatedRide {
+    /// True position of every row in the local frame of `signals`.
+    pub fn truth_in(&self, frame: &LocalFrame) -> Vec<Vector3<f64>> {
+        let sim = LocalFrame::new(self.origin);
+        self.truth_enu.iter().map(|p| frame.to_enu(&sim.to_geodetic(p))).collect()
+    }
+
+    /// Compare a reconstructed path (one position per row, in `frame`) with the truth.
+    pub fn errors(&self, signals: &crate::signals::Signals, path: &[Vector3<f64>]) -> TruthErrors {
+        let truth = self.truth_in(&signals.frame);
+        let h = |a: &Vector3<f64>, b: &Vector3<f64>| (a.x - b.x).powi(2) + (a.y - b.y).powi(2);
+        let rms = |s: f64, n: usize| (s / n.max(1) as f64).sqrt();
+        let (mut at_fix, mut fixes) = (0.0, 0.0);
+        for f in &signals.fixes {
+            at_fix += h(&path[f.row], &truth[f.row]);
+            fixes += (f.en[0] - truth[f.row].x).powi(2) + (f.en[1] - truth[f.row].y).powi(2);
+        }
+        let (mut out, mut n_out, mut all) = (0.0, 0, 0.0);
+        for (j, &t) in signals.t.iter().enumerate() {
+            let e = h(&path[j], &truth[j]);
+            all += e;
+            if self.truth.gps_outages_s.iter().any(|&(a, b)| t >= a && t < b) {
+                out += e;
+                n_out += 1;
+            }
+        }
+        TruthErrors {
+            path_at_fixes_m: rms(at_fix, signals.fixes.len()),
+            fixes_m: rms(fixes, signals.fixes.len()),
+            path_in_outages_m: (n_out > 0).then(|| rms(out, n_out)),
+            path_all_m: rms(all, signals.len()),
+        }
+    }
+}
