@@ -164,7 +164,7 @@ fn phase_name(p: Phase) -> &'static str {
 
 fn progress_line(r: &IterationReport) -> String {
     format!(
-        "{:>4} {} {:<2} cost {:>12.4} rms {:>7.3} m {}{}",
+        "{:>4} {} {:<2} cost {:>12.4} rms {:>7.3} m {} {}{}",
         r.iteration,
         phase_name(r.phase),
         match r.method {
@@ -173,6 +173,10 @@ fn progress_line(r: &IterationReport) -> String {
         },
         r.cost,
         r.rms_horizontal_m,
+        match r.method {
+            Method::Lm => format!("lambda {:.1e}", r.damping),
+            Method::Gd => format!("gamma {:.1e}", r.step_size),
+        },
         if r.accepted { "" } else { "(step rejected) " },
         if r.phase_finished { "(converged)" } else { "" }
     )
