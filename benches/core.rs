@@ -12,8 +12,14 @@ use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, simulate};
 
 fn ride(minutes: f64) -> (String, Arc<Signals>) {
-    let sim = simulate(&SimConfig { seed: 3, duration_s: minutes * 60.0, ..SimConfig::default() }).expect("simulate");
-    let sig = Signals::from_log(&parse(sim.log_csv.as_bytes(), "bench").expect("parse")).expect("signals");
+    let sim = simulate(&SimConfig {
+        seed: 3,
+        duration_s: minutes * 60.0,
+        ..SimConfig::default()
+    })
+    .expect("simulate");
+    let sig = Signals::from_log(&parse(sim.log_csv.as_bytes(), "bench").expect("parse"))
+        .expect("signals");
     (sim.log_csv, Arc::new(sig))
 }
 
@@ -24,14 +30,22 @@ fn bench(c: &mut Criterion) {
         let (csv, sig) = ride(minutes);
         let label = format!("{minutes:.0}min");
         g.bench_function(format!("load/{label}"), |b| {
-            b.iter(|| Signals::from_log(&parse(black_box(csv.as_bytes()), "bench").unwrap()).unwrap())
+            b.iter(|| {
+                Signals::from_log(&parse(black_box(csv.as_bytes()), "bench").unwrap()).unwrap()
+            })
         });
         let model = Model::new(sig.clone(), ModelSpec::default()).unwrap();
         let theta = model.initial_params();
-        g.bench_function(format!("cost/{label}"), |b| b.iter(|| model.cost(black_box(&theta))));
-        g.bench_function(format!("gradient/{label}"), |b| b.iter(|| model.gradient(black_box(&theta))));
+        g.bench_function(format!("cost/{label}"), |b| {
+            b.iter(|| model.cost(black_box(&theta)))
+        });
+        g.bench_function(format!("gradient/{label}"), |b| {
+            b.iter(|| model.gradient(black_box(&theta)))
+        });
         let free = vec![true; model.n_params()];
-        g.bench_function(format!("normal_equations/{label}"), |b| b.iter(|| model.normal_equations(black_box(&theta), &free)));
+        g.bench_function(format!("normal_equations/{label}"), |b| {
+            b.iter(|| model.normal_equations(black_box(&theta), &free))
+        });
         g.bench_function(format!("fit/{label}"), |b| {
             b.iter(|| {
                 let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();

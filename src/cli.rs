@@ -16,7 +16,11 @@ use gyropath::signals::Signals;
 use gyropath::simulation::{self, SimConfig};
 
 #[derive(Debug, Parser)]
-#[command(name = "gyropath", version, about = "Reconstruct a ride's path from gyro, odometer and GPS by estimating the gyro bias")]
+#[command(
+    name = "gyropath",
+    version,
+    about = "Reconstruct a ride's path from gyro, odometer and GPS by estimating the gyro bias"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Option<Command>,
@@ -115,14 +119,21 @@ pub struct SimulateArgs {
 }
 
 fn split_list(s: &str) -> Vec<String> {
-    s.split(',').map(str::trim).filter(|s| !s.is_empty()).map(String::from).collect()
+    s.split(',')
+        .map(str::trim)
+        .filter(|s| !s.is_empty())
+        .map(String::from)
+        .collect()
 }
 
 impl FitArgs {
     pub fn settings(&self) -> Result<FitSettings> {
         let walk = match self.bias_walk.trim() {
             "none" | "off" => None,
-            v => Some(v.parse::<f64>().with_context(|| format!("--bias-walk: '{v}' is not a number or 'none'"))?),
+            v => Some(
+                v.parse::<f64>()
+                    .with_context(|| format!("--bias-walk: '{v}' is not a number or 'none'"))?,
+            ),
         };
         Ok(FitSettings {
             model: ModelSpec {
@@ -213,7 +224,9 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
     if let Some(out) = &args.out {
         let path = fit.trajectory();
-        write_atomically(out, Some(&args.ride), |w| write_path_csv(w, fit.model(), &path))?;
+        write_atomically(out, Some(&args.ride), |w| {
+            write_path_csv(w, fit.model(), &path)
+        })?;
     }
     if let Some(rep) = &args.report {
         write_atomically(rep, Some(&args.ride), |w| {
@@ -228,9 +241,15 @@ pub fn fit(args: &FitArgs) -> Result<()> {
 }
 
 fn print_summary(r: &FitReport) {
-    println!("ride      {} ({} rows, {:.0} s, {} GPS fixes)", r.source, r.rows, r.duration_s, r.gps_fixes);
+    println!(
+        "ride      {} ({} rows, {:.0} s, {} GPS fixes)",
+        r.source, r.rows, r.duration_s, r.gps_fixes
+    );
     println!("model     {}", r.model.join(", "));
-    println!("iters     step 1: {}, step 2: {}", r.iterations_step1, r.iterations_step2);
+    println!(
+        "iters     step 1: {}, step 2: {}",
+        r.iterations_step1, r.iterations_step2
+    );
     println!("cost      {:.4}", r.stats.cost);
     println!("rms       horizontal {:.3} m", r.stats.rms_horizontal_m);
     if let Some(v) = r.stats.rms_gps_up_m {
@@ -245,7 +264,10 @@ fn print_summary(r: &FitReport) {
             println!("{effect}: {n} segments (see --report)");
             continue;
         }
-        let list: Vec<String> = values.iter().map(|p| format!("{} {:.5} {}", p.name, p.value, p.unit)).collect();
+        let list: Vec<String> = values
+            .iter()
+            .map(|p| format!("{} {:.5} {}", p.name, p.value, p.unit))
+            .collect();
         println!("{effect}: {}", list.join(", "));
     }
     println!("time      {:.2} s", r.elapsed_s);
@@ -276,7 +298,11 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
         args.out.display(),
         ride.truth.duration_s,
         ride.truth.distance_m,
-        if config.hidden.is_empty() { "none".into() } else { config.hidden.join(", ") }
+        if config.hidden.is_empty() {
+            "none".into()
+        } else {
+            config.hidden.join(", ")
+        }
     );
     Ok(())
 }

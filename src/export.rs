@@ -31,15 +31,23 @@ pub fn write_atomically(
     protect: Option<&Path>,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<(), ExportError> {
-    let io = |source| ExportError::Io { path: path.display().to_string(), source };
+    let io = |source| ExportError::Io {
+        path: path.display().to_string(),
+        source,
+    };
     if let Some(input) = protect
         && let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(path))
         && a == b
     {
         return Err(ExportError::WouldOverwriteInput(path.display().to_string()));
     }
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = path.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
     let tmp: PathBuf = dir.join(format!(".{name}.{}.tmp", std::process::id()));
     let result = (|| {
         let file = std::fs::File::create(&tmp)?;
@@ -57,9 +65,16 @@ pub fn write_atomically(
 
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
 /// compass heading) for every row of the log.
-pub fn write_path_csv(out: &mut dyn Write, model: &Model, path: &Trajectory) -> std::io::Result<()> {
+pub fn write_path_csv(
+    out: &mut dyn Write,
+    model: &Model,
+    path: &Trajectory,
+) -> std::io::Result<()> {
     let sig = &model.signals;
-    writeln!(out, "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg")?;
+    writeln!(
+        out,
+        "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg"
+    )?;
     for j in 0..sig.len() {
         let p = &path.p[j];
         let g = sig.frame.to_geodetic(p);
@@ -137,6 +152,10 @@ impl FitReport {
 
     /// A parameter's shown value by effect id and name.
     pub fn value(&self, effect: &str, name: &str) -> Option<f64> {
-        self.parameters.get(effect)?.iter().find(|p| p.name == name).map(|p| p.value)
+        self.parameters
+            .get(effect)?
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
     }
 }

@@ -145,7 +145,10 @@ mod tests {
         ] {
             let g = Geodetic::new(lat, lon, h);
             let back = Geodetic::from_ecef(&g.to_ecef());
-            assert!((back.to_ecef() - g.to_ecef()).norm() < 1e-4, "{g:?} -> {back:?}");
+            assert!(
+                (back.to_ecef() - g.to_ecef()).norm() < 1e-4,
+                "{g:?} -> {back:?}"
+            );
             assert!((back.alt_m - h).abs() < 1e-4);
         }
     }
@@ -158,7 +161,10 @@ mod tests {
         assert!((north.y - 30.89).abs() < 0.05, "{north}");
         assert!(north.x.abs() < 1e-6 && north.z.abs() < 1e-3);
         let east = frame.to_enu(&Geodetic::new(47.5, 19.0 + 1.0 / 3600.0, 100.0));
-        assert!((east.x - 20.9).abs() < 0.05 && east.y.abs() < 1e-3, "{east}");
+        assert!(
+            (east.x - 20.9).abs() < 0.05 && east.y.abs() < 1e-3,
+            "{east}"
+        );
         let up = frame.to_enu(&Geodetic::new(47.5, 19.0, 110.0));
         assert!((up - Vector3::new(0.0, 0.0, 10.0)).norm() < 1e-6);
         let p = Vector3::new(1234.5, -987.6, 12.3);

@@ -12,6 +12,9 @@
 //! - [`export`]: reconstructed path CSV and JSON report.
 //! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
 
+// Index loops over rows and axes read like the equations they implement.
+#![allow(clippy::needless_range_loop)]
+
 pub mod effects;
 pub mod export;
 pub mod geodesy;

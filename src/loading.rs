@@ -71,7 +71,9 @@ impl RideLog {
 
     /// Configured wheel circumference, when the metadata gives one.
     pub fn wheel_circumference_m(&self) -> Option<&str> {
-        self.metadata.get("wheel_circumference_m").map(String::as_str)
+        self.metadata
+            .get("wheel_circumference_m")
+            .map(String::as_str)
     }
 }
 
@@ -482,9 +484,15 @@ mod tests {
         let e = err(&GOOD.replace("0.17500", "NaN"));
         assert!(e.starts_with("bad.csv:5: column 'gx_dps'"), "{e}");
         let e = err(&GOOD.replace("0.02,", "0.01,"));
-        assert!(e.starts_with("bad.csv:6: column 't_s': time 0.01 does not increase"), "{e}");
+        assert!(
+            e.starts_with("bad.csv:6: column 't_s': time 0.01 does not increase"),
+            "{e}"
+        );
         let e = err(&GOOD.replace("gz_dps,", "gq_dps,"));
-        assert!(e.contains("bad.csv:3: column 'gz_dps': required column is missing"), "{e}");
+        assert!(
+            e.contains("bad.csv:3: column 'gz_dps': required column is missing"),
+            "{e}"
+        );
         let e = err(&GOOD.replace(",136.01,16.6", ",136.01"));
         assert!(e.starts_with("bad.csv:5:") && e.contains("fields"), "{e}");
         let e = err(&GOOD.replace("# wheel_circumference_m: 2.1180\n", ""));

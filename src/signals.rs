@@ -137,11 +137,9 @@ impl Signals {
             return Err(unusable("the log has no distance column".into()));
         };
 
-        let first = log
-            .fix
-            .iter()
-            .position(Option::is_some)
-            .ok_or_else(|| unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into()))?;
+        let first = log.fix.iter().position(Option::is_some).ok_or_else(|| {
+            unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into())
+        })?;
         let (lat0, lon0) = log.fix[first].unwrap_or_default();
         let alt0 = log
             .gps_alt_m
@@ -297,7 +295,11 @@ pub fn distance_from_pulses(t: &[f64], pulses: &[bool], circumference: f64) -> (
             && te - tp > STOP_GAP_S
         {
             // Stop between the previous edge and this one.
-            let before = if k >= 2 { t[edges[k - 1]] - t[edges[k - 2]] } else { STOP_GAP_S };
+            let before = if k >= 2 {
+                t[edges[k - 1]] - t[edges[k - 2]]
+            } else {
+                STOP_GAP_S
+            };
             let after = edges.get(k + 1).map_or(STOP_GAP_S, |&nx| t[nx] - te);
             let slow = before.min(STOP_GAP_S) / 2.0;
             let start = after.min(STOP_GAP_S) / 2.0;

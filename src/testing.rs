@@ -44,12 +44,23 @@ pub fn winding_log(duration: f64, rate_hz: f64) -> RideLog {
             bias[1] + 0.6 * (0.011 * t).cos(),
             bias[2] + yaw_rate.to_degrees(),
         ]);
-        log.odo_m.as_mut().map(|o| o.push(Some(s * 0.97)));
+        if let Some(o) = log.odo_m.as_mut() {
+            o.push(Some(s * 0.97));
+        }
         let fix = (i as f64 / rate_hz).fract() < 0.5 / rate_hz;
         let wobble = 1.5 * (0.31 * t).sin();
-        log.fix.push(fix.then(|| (lat0 + (nn + wobble) / m_per_deg_lat, 19.0 + (e - wobble) / m_per_deg_lon)));
-        log.gps_alt_m.as_mut().map(|a| a.push(fix.then_some(100.0 + u + 2.0 * (0.2 * t).cos())));
-        log.baro_alt_m.as_mut().map(|b| b.push(Some(140.0 + u + 0.1 * (1.3 * t).sin())));
+        log.fix.push(fix.then(|| {
+            (
+                lat0 + (nn + wobble) / m_per_deg_lat,
+                19.0 + (e - wobble) / m_per_deg_lon,
+            )
+        }));
+        if let Some(a) = log.gps_alt_m.as_mut() {
+            a.push(fix.then_some(100.0 + u + 2.0 * (0.2 * t).cos()));
+        }
+        if let Some(b) = log.baro_alt_m.as_mut() {
+            b.push(Some(140.0 + u + 0.1 * (1.3 * t).sin()));
+        }
         log.channels[0].1.push(Some(15.0 + t / 100.0));
     }
     log

@@ -52,7 +52,13 @@ impl Effect for GyroBias {
         }
     }
 
-    fn gyro_backward(&self, _p: &[f64], _omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+    fn gyro_backward(
+        &self,
+        _p: &[f64],
+        _omega_in: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        grad_p: &mut [f64],
+    ) {
         let total: Vector3<f64> = grad.iter().skip(1).sum();
         for a in 0..3 {
             grad_p[a] -= total[a];
@@ -67,7 +73,12 @@ mod tests {
     #[test]
     fn partials_match_finite_differences() {
         let p = [0.01, -0.02, 0.03];
-        crate::effects::testing::check_gyro_partials(&GyroBias, &p, 5, Vector3::new(0.1, 0.2, -0.3));
+        crate::effects::testing::check_gyro_partials(
+            &GyroBias,
+            &p,
+            5,
+            Vector3::new(0.1, 0.2, -0.3),
+        );
         crate::effects::testing::check_batches(&GyroBias, &p, 500);
     }
 }

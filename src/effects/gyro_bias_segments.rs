@@ -67,8 +67,8 @@ impl GyroBiasSegments {
             let e = &mut steps[s as usize];
             *e = Some(e.map_or((j, j), |(a, _)| (a, j)));
         }
-        let prior_weight = bias_walk_dps_sqrt_s
-            .map_or(0.0, |w| 1.0 / (w / DEG_PER_RAD * segment_s.sqrt()));
+        let prior_weight =
+            bias_walk_dps_sqrt_s.map_or(0.0, |w| 1.0 / (w / DEG_PER_RAD * segment_s.sqrt()));
         Ok(Self {
             segment_s,
             segment_of,
@@ -141,7 +141,13 @@ impl Effect for GyroBiasSegments {
         }
     }
 
-    fn gyro_backward(&self, _p: &[f64], _omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+    fn gyro_backward(
+        &self,
+        _p: &[f64],
+        _omega_in: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        grad_p: &mut [f64],
+    ) {
         for (g, &s) in grad.iter().zip(&self.segment_of).skip(1) {
             let s = 3 * s as usize;
             grad_p[s] -= g.x;

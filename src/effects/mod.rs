@@ -172,7 +172,13 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     }
     /// Back-propagate through the gyro site over every step: `grad[j]` holds
     /// `dC/d omega_out` and becomes `dC/d omega_in`; parameter gradients are added to `grad_p`.
-    fn gyro_backward(&self, p: &[f64], omega_in: &[Vector3<f64>], grad: &mut [Vector3<f64>], grad_p: &mut [f64]) {
+    fn gyro_backward(
+        &self,
+        p: &[f64],
+        omega_in: &[Vector3<f64>],
+        grad: &mut [Vector3<f64>],
+        grad_p: &mut [f64],
+    ) {
         for (j, g) in grad.iter_mut().enumerate().skip(1) {
             let part = self.gyro_partials(p, j, &omega_in[j]);
             for &(c, col) in part.params.as_slice() {
@@ -306,7 +312,11 @@ pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Ef
         "initial_orientation" => Box::new(InitialOrientation),
         "odometer_gain" => Box::new(OdometerGain),
         "gyro_bias" => Box::new(GyroBias),
-        "gyro_bias_segments" => Box::new(GyroBiasSegments::new(signals, spec.segment_s, spec.bias_walk_dps_sqrt_s)?),
+        "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
+            signals,
+            spec.segment_s,
+            spec.bias_walk_dps_sqrt_s,
+        )?),
         "baro_offset" => {
             if !signals.has_baro {
                 return Err(ModelError::NotApplicable {
@@ -327,29 +337,46 @@ pub(crate) mod testing {
 
     /// Check that the batch forms agree with the per-step forms over `n` steps.
     pub fn check_batches(effect: &dyn Effect, p: &[f64], n: usize) {
-        let rates: Vec<Vector3<f64>> = (0..n).map(|j| Vector3::new(0.1, -0.2, 0.3) * (j as f64 * 0.01).sin()).collect();
+        let rates: Vec<Vector3<f64>> = (0..n)
+            .map(|j| Vector3::new(0.1, -0.2, 0.3) * (j as f64 * 0.01).sin())
+            .collect();
         let mut batch = rates.clone();
         effect.gyro_batch(p, &mut batch);
-        let mut grad: Vec<Vector3<f64>> = (0..n).map(|j| Vector3::new(1.0, 2.0, -1.0) * (j as f64 * 0.03).cos()).collect();
+        let mut grad: Vec<Vector3<f64>> = (0..n)
+            .map(|j| Vector3::new(1.0, 2.0, -1.0) * (j as f64 * 0.03).cos())
+            .collect();
         let mut gp = vec![0.0; p.len()];
         let mut gp_ref = vec![0.0; p.len()];
-        let grad_ref: Vec<Vector3<f64>> = grad.iter().enumerate().map(|(j, g)| {
-            if j == 0 {
-                return *g;
-            }
-            let part = effect.gyro_partials(p, j, &rates[j]);
-            for &(c, col) in part.params.as_slice() {
-                gp_ref[c] += col.dot(g);
-            }
-            part.d_in.transpose() * g
-        }).collect();
+        let grad_ref: Vec<Vector3<f64>> = grad
+            .iter()
+            .enumerate()
+            .map(|(j, g)| {
+                if j == 0 {
+                    return *g;
+                }
+                let part = effect.gyro_partials(p, j, &rates[j]);
+                for &(c, col) in part.params.as_slice() {
+                    gp_ref[c] += col.dot(g);
+                }
+                part.d_in.transpose() * g
+            })
+            .collect();
         effect.gyro_backward(p, &rates, &mut grad, &mut gp);
         for j in 1..n {
-            assert!((batch[j] - effect.gyro(p, j, rates[j])).norm() < 1e-12, "batch forward at {j}");
-            assert!((grad[j] - grad_ref[j]).norm() < 1e-9, "batch backward at {j}");
+            assert!(
+                (batch[j] - effect.gyro(p, j, rates[j])).norm() < 1e-12,
+                "batch forward at {j}"
+            );
+            assert!(
+                (grad[j] - grad_ref[j]).norm() < 1e-9,
+                "batch backward at {j}"
+            );
         }
         for (a, b) in gp.iter().zip(&gp_ref) {
-            assert!((a - b).abs() < 1e-9 * (1.0 + b.abs()), "parameter gradient {a} vs {b}");
+            assert!(
+                (a - b).abs() < 1e-9 * (1.0 + b.abs()),
+                "parameter gradient {a} vs {b}"
+            );
         }
     }
 

@@ -68,12 +68,22 @@ impl Model {
         let (_, rate_inputs) = self.corrected_rates(theta, true);
         for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
             let r = self.range(e);
-            self.effects[e].gyro_backward(self.params_of(e, theta), &rate_inputs[i], &mut g_rate, &mut grad[r]);
+            self.effects[e].gyro_backward(
+                self.params_of(e, theta),
+                &rate_inputs[i],
+                &mut g_rate,
+                &mut grad[r],
+            );
         }
         let (_, dist_inputs) = self.corrected_distances(theta, true);
         for (i, &e) in self.distance_chain.iter().enumerate().rev() {
             let r = self.range(e);
-            self.effects[e].distance_backward(self.params_of(e, theta), &dist_inputs[i], &mut g_dist, &mut grad[r]);
+            self.effects[e].distance_backward(
+                self.params_of(e, theta),
+                &dist_inputs[i],
+                &mut g_dist,
+                &mut grad[r],
+            );
         }
 
         if let Some(e) = self.position {

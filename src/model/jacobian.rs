@@ -86,7 +86,13 @@ impl Model {
         let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
         let mut dchain = vec![0.0; self.distance_chain.len() + 1];
 
-        let mut emit = |row: usize, p: &Vector3<f64>, active: &[usize], u: &[Vector3<f64>], v: &[Vector3<f64>], dsum: &[Vector3<f64>], k: &mut usize| {
+        let mut emit = |row: usize,
+                        p: &Vector3<f64>,
+                        active: &[usize],
+                        u: &[Vector3<f64>],
+                        v: &[Vector3<f64>],
+                        dsum: &[Vector3<f64>],
+                        k: &mut usize| {
             if *k >= obs.len() || obs[*k].row != row {
                 return;
             }
@@ -144,7 +150,8 @@ impl Model {
             let d = dchain[self.distance_chain.len()];
             let mut scale = 1.0;
             for (i, &e) in self.distance_chain.iter().enumerate().rev() {
-                let part = self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
+                let part =
+                    self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
                 for &(c, dv) in part.params.as_slice() {
                     let idx = self.offsets[e] + c;
                     if free[idx] {

@@ -23,10 +23,10 @@ pub mod rotation;
 mod start;
 mod sweep;
 
-pub use rotation::Increment;
-pub use start::{StartError, StartGuess};
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
+pub use rotation::Increment;
+pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, Trajectory};
 
 use std::sync::Arc;
@@ -138,14 +138,20 @@ impl Model {
     }
 
     /// Build with a given start guess (used when re-shaping a running fit).
-    pub fn with_start(signals: Arc<Signals>, spec: ModelSpec, start: StartGuess) -> Result<Self, ModelError> {
+    pub fn with_start(
+        signals: Arc<Signals>,
+        spec: ModelSpec,
+        start: StartGuess,
+    ) -> Result<Self, ModelError> {
         for (name, v) in [
             ("GPS horizontal sigma", spec.sigma_horizontal_m),
             ("GPS vertical sigma", spec.sigma_vertical_m),
             ("barometer sigma", spec.sigma_baro_m),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(ModelError::Setting(format!("{name} must be a positive number of metres, got {v}")));
+                return Err(ModelError::Setting(format!(
+                    "{name} must be a positive number of metres, got {v}"
+                )));
             }
         }
         let ids = effects::expand(&spec.effects, &signals)?;
@@ -162,15 +168,25 @@ impl Model {
         let orientation = find(&|e| e.initial_orientation(&zeros).is_some());
         let position = find(&|e| e.initial_position(&zeros).is_some());
         let baro = find(&|e| e.baro_offset(&zeros).is_some());
-        let gyro_chain = (0..effects.len()).filter(|&e| effects[e].acts_on_gyro()).collect();
-        let distance_chain = (0..effects.len()).filter(|&e| effects[e].acts_on_distance()).collect();
+        let gyro_chain = (0..effects.len())
+            .filter(|&e| effects[e].acts_on_gyro())
+            .collect();
+        let distance_chain = (0..effects.len())
+            .filter(|&e| effects[e].acts_on_distance())
+            .collect();
         let n_prior = effects.iter().map(|e| e.n_prior()).sum();
 
         let mut observations = Vec::new();
         for fix in &signals.fixes {
             let wh = 1.0 / spec.sigma_horizontal_m;
             for axis in 0..2 {
-                observations.push(Observation { row: fix.row, axis, target: fix.en[axis], w: wh, baro: false });
+                observations.push(Observation {
+                    row: fix.row,
+                    axis,
+                    target: fix.en[axis],
+                    w: wh,
+                    baro: false,
+                });
             }
             if let Some(up) = fix.up {
                 observations.push(Observation {
@@ -182,7 +198,13 @@ impl Model {
                 });
             }
             if let (Some(b), Some(_)) = (fix.baro, baro) {
-                observations.push(Observation { row: fix.row, axis: 2, target: b, w: 1.0 / spec.sigma_baro_m, baro: true });
+                observations.push(Observation {
+                    row: fix.row,
+                    axis: 2,
+                    target: b,
+                    w: 1.0 / spec.sigma_baro_m,
+                    baro: true,
+                });
             }
         }
         Ok(Self {
@@ -225,7 +247,10 @@ impl Model {
 
     /// Starting parameter vector.
     pub fn initial_params(&self) -> Vec<f64> {
-        self.effects.iter().flat_map(|e| e.initial(&self.start)).collect()
+        self.effects
+            .iter()
+            .flat_map(|e| e.initial(&self.start))
+            .collect()
     }
 
     /// Parameter descriptions, in parameter-vector order, with their effect id.
@@ -276,7 +301,9 @@ impl Model {
     pub fn carry_over(&self, other: &Model, other_params: &[f64]) -> Vec<f64> {
         let mut p = self.initial_params();
         for (e, effect) in self.effects.iter().enumerate() {
-            let Some(o) = other.effect_index(&effect.id()) else { continue };
+            let Some(o) = other.effect_index(&effect.id()) else {
+                continue;
+            };
             let old = &other_params[other.range(o)];
             let r = self.range(e);
             if r.len() == old.len() && effect.segment_edges().is_none() {
@@ -293,7 +320,10 @@ impl Model {
     }
 
     /// Initial attitude and position for `theta`, and the world-rotation vector `phi`.
-    pub(crate) fn initial_state(&self, theta: &[f64]) -> (UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>) {
+    pub(crate) fn initial_state(
+        &self,
+        theta: &[f64],
+    ) -> (UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>) {
         let phi = self
             .orientation
             .and_then(|e| self.effects[e].initial_orientation(self.params_of(e, theta)))
@@ -323,8 +353,11 @@ impl Model {
             effect.prior(self.params_of(e, theta), &mut rows);
             let base = all.residuals.len();
             all.residuals.extend_from_slice(&rows.residuals);
-            all.entries
-                .extend(rows.entries.iter().map(|&(r, c, v)| (base + r, self.offsets[e] + c, v)));
+            all.entries.extend(
+                rows.entries
+                    .iter()
+                    .map(|&(r, c, v)| (base + r, self.offsets[e] + c, v)),
+            );
         }
         all
     }

@@ -48,16 +48,17 @@ impl Model {
     /// Falls back to `J^T J` of the dense Jacobian when local parameters
     /// overlap in a way the moment form does not cover.
     pub fn normal_equations(&self, theta: &[f64], free: &[bool]) -> NormalEquations {
-        self.structured_normal_equations(theta, free).unwrap_or_else(|| {
-            let lin = self.linearise(theta, free);
-            let jt = lin.jacobian.transpose();
-            NormalEquations {
-                a: &jt * &lin.jacobian,
-                g: &jt * &lin.residuals,
-                cost: lin.cost,
-                columns: lin.columns,
-            }
-        })
+        self.structured_normal_equations(theta, free)
+            .unwrap_or_else(|| {
+                let lin = self.linearise(theta, free);
+                let jt = lin.jacobian.transpose();
+                NormalEquations {
+                    a: &jt * &lin.jacobian,
+                    g: &jt * &lin.residuals,
+                    cost: lin.cost,
+                    columns: lin.columns,
+                }
+            })
     }
 
     fn structured_normal_equations(&self, theta: &[f64], free: &[bool]) -> Option<NormalEquations> {
@@ -81,10 +82,17 @@ impl Model {
                         globals.push(i);
                     }
                     Some((first, last)) => {
-                        let b = match blocks.iter().position(|b| b.first == first && b.last == last) {
+                        let b = match blocks
+                            .iter()
+                            .position(|b| b.first == first && b.last == last)
+                        {
                             Some(b) => b,
                             None => {
-                                blocks.push(Block { first, last, params: Vec::new() });
+                                blocks.push(Block {
+                                    first,
+                                    last,
+                                    params: Vec::new(),
+                                });
                                 blocks.len() - 1
                             }
                         };
@@ -143,7 +151,12 @@ impl Model {
         if max_block > 3 {
             return None;
         }
-        let mut emit = |row: usize, p: &Vector3<f64>, u: &[Vector3<f64>], v: &[Vector3<f64>], dsum: &[Vector3<f64>], k: &mut usize| {
+        let mut emit = |row: usize,
+                        p: &Vector3<f64>,
+                        u: &[Vector3<f64>],
+                        v: &[Vector3<f64>],
+                        dsum: &[Vector3<f64>],
+                        k: &mut usize| {
             while *k < no && obs[*k].row == row {
                 let o = &obs[*k];
                 let a = o.axis;
@@ -224,7 +237,8 @@ impl Model {
             let d = dchain[self.distance_chain.len()];
             let mut scale = 1.0;
             for (i, &e) in self.distance_chain.iter().enumerate().rev() {
-                let part = self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
+                let part =
+                    self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
                 for &(c, dv) in part.params.as_slice() {
                     let idx = self.offsets[e] + c;
                     if free[idx] {
@@ -243,7 +257,14 @@ impl Model {
             .map(|b| {
                 b.params
                     .iter()
-                    .map(|&i| V9::from_iterator(u[i].iter().chain(v[i].iter()).chain(dsum[i].iter()).copied()))
+                    .map(|&i| {
+                        V9::from_iterator(
+                            u[i].iter()
+                                .chain(v[i].iter())
+                                .chain(dsum[i].iter())
+                                .copied(),
+                        )
+                    })
                     .collect()
             })
             .collect();
@@ -252,7 +273,13 @@ impl Model {
         let nb = blocks.len();
         let after: Vec<usize> = blocks
             .iter()
-            .map(|b| if b.last == usize::MAX { no } else { obs.partition_point(|o| o.row <= b.last) })
+            .map(|b| {
+                if b.last == usize::MAX {
+                    no
+                } else {
+                    obs.partition_point(|o| o.row <= b.last)
+                }
+            })
             .collect();
         let mut h_after = vec![M9::zeros(); nb];
         let mut r_after = vec![V9::zeros(); nb];
@@ -303,7 +330,10 @@ impl Model {
             }
         }
         // Explicit rows inside each block: J_ob^T J_ob, J_G^T J_ob, J_ob^T r, and K_b = sum h^T J_ob.
-        let mut kb: Vec<Vec<V9>> = blocks.iter().map(|b| vec![V9::zeros(); b.params.len()]).collect();
+        let mut kb: Vec<Vec<V9>> = blocks
+            .iter()
+            .map(|b| vec![V9::zeros(); b.params.len()])
+            .collect();
         for o in 0..no {
             let (b, vals) = jb[o];
             if b == u32::MAX {
@@ -327,7 +357,9 @@ impl Model {
         let mut z: Vec<Vec<V9>> = Vec::with_capacity(nb);
         for b in 0..nb {
             let block = &blocks[b];
-            let zb: Vec<V9> = (0..block.params.len()).map(|x| kb[b][x] + h_after[b] * y[b][x]).collect();
+            let zb: Vec<V9> = (0..block.params.len())
+                .map(|x| kb[b][x] + h_after[b] * y[b][x])
+                .collect();
             for (x, &ix) in block.params.iter().enumerate() {
                 g[pos[ix]] += y[b][x].dot(&r_after[b]);
                 for (zz, &iz) in block.params.iter().enumerate() {
@@ -372,6 +404,11 @@ impl Model {
             }
         }
         cost += prior.residuals.iter().map(|x| x * x).sum::<f64>();
-        Some(NormalEquations { a, g, cost, columns })
+        Some(NormalEquations {
+            a,
+            g,
+            cost,
+            columns,
+        })
     }
 }

@@ -59,7 +59,8 @@ impl Increment {
                     (s, ds / n)
                 };
                 let phi = theta * s;
-                right_jacobian(&phi) * (Matrix3::identity() * s + theta * theta.transpose() * ds_over_n)
+                right_jacobian(&phi)
+                    * (Matrix3::identity() * s + theta * theta.transpose() * ds_over_n)
             }
         }
     }
@@ -84,7 +85,11 @@ pub fn exp_quaternion(theta: &Vector3<f64>) -> UnitQuaternion<f64> {
 #[inline]
 pub fn forward(q: &UnitQuaternion<f64>) -> Vector3<f64> {
     let (w, x, y, z) = (q.w, q.i, q.j, q.k);
-    Vector3::new(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y))
+    Vector3::new(
+        1.0 - 2.0 * (y * y + z * z),
+        2.0 * (x * y + w * z),
+        2.0 * (x * z - w * y),
+    )
 }
 
 /// The cross-product matrix, `skew(a) b = a x b`.
@@ -143,7 +148,10 @@ mod tests {
 
     #[test]
     fn series_exponential_and_forward_axis_are_exact() {
-        for theta in random_vectors().into_iter().chain([Vector3::new(0.01, -0.02, 0.015)]) {
+        for theta in random_vectors()
+            .into_iter()
+            .chain([Vector3::new(0.01, -0.02, 0.015)])
+        {
             let a = exp_quaternion(&theta);
             let b = UnitQuaternion::from_scaled_axis(theta);
             assert!((a.coords - b.coords).norm() < 1e-15, "{theta}");
@@ -165,7 +173,10 @@ mod tests {
                     let minus = log(&(g0.inverse() * inc.quaternion(&(theta - d))));
                     let fd = (plus - minus) / (2.0 * h);
                     let an = j.column(axis);
-                    assert!((fd - an).norm() < 1e-7, "{inc:?} {theta} axis {axis}: {fd} vs {an}");
+                    assert!(
+                        (fd - an).norm() < 1e-7,
+                        "{inc:?} {theta} axis {axis}: {fd} vs {an}"
+                    );
                 }
             }
         }
@@ -199,7 +210,7 @@ mod tests {
             let tol = if inc == Increment::Exact { 1e-12 } else { 1e-4 };
             assert!((fwd - Vector3::y()).norm() < tol, "{inc:?}: {fwd}");
             let compass = compass_deg(fwd.x, fwd.y);
-            assert!(compass < 0.01 || compass > 359.99, "{compass}");
+            assert!(!(0.01..=359.99).contains(&compass), "{compass}");
         }
         // Nose-up pitch is a negative rotation about the left (y) axis.
         let q = UnitQuaternion::from_scaled_axis(Vector3::new(0.0, -0.1, 0.0));

@@ -49,7 +49,11 @@ fn wrap(a: f64) -> f64 {
 fn median(v: &mut [f64]) -> f64 {
     v.sort_by(f64::total_cmp);
     let n = v.len();
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }
 
 impl StartGuess {
@@ -102,7 +106,11 @@ impl StartGuess {
             .filter(|w| w[1].0 - w[0].0 < 3.0 * MAX_FIX_GAP_S)
             .map(|w| wrap(w[1].1 - w[0].1) / (w[1].0 - w[0].0))
             .collect();
-        let slope0 = if slopes.is_empty() { 0.0 } else { median(&mut slopes) };
+        let slope0 = if slopes.is_empty() {
+            0.0
+        } else {
+            median(&mut slopes)
+        };
         // Offset: circular mean of the detrended samples.
         let (s, c) = samples.iter().fold((0.0, 0.0), |(s, c), &(t, d, w)| {
             let x = d - slope0 * t;
@@ -110,7 +118,10 @@ impl StartGuess {
         });
         let offset0 = s.atan2(c);
         // Refine by weighted least squares on the unwrapped residuals within 3 MAD.
-        let resid: Vec<f64> = samples.iter().map(|&(t, d, _)| wrap(d - offset0 - slope0 * t)).collect();
+        let resid: Vec<f64> = samples
+            .iter()
+            .map(|&(t, d, _)| wrap(d - offset0 - slope0 * t))
+            .collect();
         let mut abs: Vec<f64> = resid.iter().map(|r| r.abs()).collect();
         let mad = median(&mut abs).max(0.01);
         let (mut sw, mut st, mut sr, mut stt, mut str_) = (0.0, 0.0, 0.0, 0.0, 0.0);
@@ -150,14 +161,21 @@ impl StartGuess {
             p += q * Vector3::x() * (odometer_gain * sig.distance[j]);
             dr[j] = p;
         }
-        let first: Vec<_> = sig.fixes.iter().take_while(|f| f.t - sig.fixes[0].t <= 30.0).collect();
+        let first: Vec<_> = sig
+            .fixes
+            .iter()
+            .take_while(|f| f.t - sig.fixes[0].t <= 30.0)
+            .collect();
         let m = first.len() as f64;
         let mut position = Vector3::zeros();
         for f in &first {
             position.x += (f.en[0] - dr[f.row].x) / m;
             position.y += (f.en[1] - dr[f.row].y) / m;
         }
-        let ups: Vec<f64> = first.iter().filter_map(|f| f.up.map(|u| u - dr[f.row].z)).collect();
+        let ups: Vec<f64> = first
+            .iter()
+            .filter_map(|f| f.up.map(|u| u - dr[f.row].z))
+            .collect();
         if !ups.is_empty() {
             position.z = ups.iter().sum::<f64>() / ups.len() as f64;
         }
@@ -165,7 +183,11 @@ impl StartGuess {
             .iter()
             .filter_map(|f| f.baro.map(|b| position.z + dr[f.row].z - b))
             .collect();
-        let baro_offset = if baros.is_empty() { 0.0 } else { baros.iter().sum::<f64>() / baros.len() as f64 };
+        let baro_offset = if baros.is_empty() {
+            0.0
+        } else {
+            baros.iter().sum::<f64>() / baros.len() as f64
+        };
         Ok(Self {
             attitude,
             position,
@@ -214,5 +236,9 @@ fn level_bias(sig: &Signals) -> Vector3<f64> {
             time += sig.dt[j];
         }
     }
-    if time > 0.0 { Vector3::new(sum.x / time, sum.y / time, 0.0) } else { Vector3::zeros() }
+    if time > 0.0 {
+        Vector3::new(sum.x / time, sum.y / time, 0.0)
+    } else {
+        Vector3::zeros()
+    }
 }

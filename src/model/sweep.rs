@@ -21,7 +21,11 @@ pub struct Trajectory {
 impl Model {
     /// Corrected rates (rad/s) of every step: the gyro chain applied in batch.
     /// With `keep_inputs`, also the input of every gyro effect (for back-propagation).
-    pub(crate) fn corrected_rates(&self, theta: &[f64], keep_inputs: bool) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
+    pub(crate) fn corrected_rates(
+        &self,
+        theta: &[f64],
+        keep_inputs: bool,
+    ) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
         let mut rates = self.signals.gyro.clone();
         let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
@@ -34,7 +38,11 @@ impl Model {
     }
 
     /// Corrected distance of every step, with the inputs of every distance effect if asked.
-    pub(crate) fn corrected_distances(&self, theta: &[f64], keep_inputs: bool) -> (Vec<f64>, Vec<Vec<f64>>) {
+    pub(crate) fn corrected_distances(
+        &self,
+        theta: &[f64],
+        keep_inputs: bool,
+    ) -> (Vec<f64>, Vec<Vec<f64>>) {
         let mut d = self.signals.distance.clone();
         let mut inputs = Vec::new();
         for &e in &self.distance_chain {
@@ -134,7 +142,12 @@ impl Model {
                 k += 1;
             }
         });
-        ev.cost += self.prior_rows(theta).residuals.iter().map(|r| r * r).sum::<f64>();
+        ev.cost += self
+            .prior_rows(theta)
+            .residuals
+            .iter()
+            .map(|r| r * r)
+            .sum::<f64>();
         ev
     }
 }

@@ -45,7 +45,12 @@ fn gradient_matches_finite_differences() {
         for i in 0..p.len() {
             let fd = fd_gradient(&m, &p, i);
             let err = (fd - g[i]).abs() / (g[i].abs() + 1e-6 * scale);
-            assert!(err < 1e-5, "{inc:?} param {i} {:?}: analytic {} fd {fd}", m.param_infos()[i], g[i]);
+            assert!(
+                err < 1e-5,
+                "{inc:?} param {i} {:?}: analytic {} fd {fd}",
+                m.param_infos()[i],
+                g[i]
+            );
         }
     }
 }
@@ -65,7 +70,12 @@ fn jacobian_matches_finite_differences_and_the_gradient() {
         let (_, g) = m.gradient(&p);
         let jtr = lin.jacobian.transpose() * &lin.residuals * 2.0;
         for i in 0..p.len() {
-            assert!((jtr[i] - g[i]).abs() < 1e-7 * (1.0 + g[i].abs()), "param {i}: {} vs {}", jtr[i], g[i]);
+            assert!(
+                (jtr[i] - g[i]).abs() < 1e-7 * (1.0 + g[i].abs()),
+                "param {i}: {} vs {}",
+                jtr[i],
+                g[i]
+            );
             let h = 1e-6;
             let (mut a, mut b) = (p.clone(), p.clone());
             a[i] += h;
@@ -74,7 +84,10 @@ fn jacobian_matches_finite_differences_and_the_gradient() {
             for r in 0..ra.len() {
                 let fd = (ra[r] - rb[r]) / (2.0 * h);
                 let an = lin.jacobian[(r, i)];
-                assert!((fd - an).abs() < 1e-5 * (1.0 + an.abs()), "{inc:?} row {r} param {i}: {an} vs {fd}");
+                assert!(
+                    (fd - an).abs() < 1e-5 * (1.0 + an.abs()),
+                    "{inc:?} row {r} param {i}: {an} vs {fd}"
+                );
             }
         }
     }
@@ -112,8 +125,15 @@ fn moment_normal_equations_equal_the_dense_ones() {
             assert_eq!(ne.columns, lin.columns);
             assert!((ne.cost - lin.cost).abs() < 1e-9 * lin.cost);
             let scale = a.amax();
-            assert!((&ne.a - &a).amax() < 1e-9 * scale, "{roles:?}: A differs by {}", (&ne.a - &a).amax());
-            assert!((&ne.g - &g).amax() < 1e-9 * g.amax().max(1.0), "{roles:?}: g differs");
+            assert!(
+                (&ne.a - &a).amax() < 1e-9 * scale,
+                "{roles:?}: A differs by {}",
+                (&ne.a - &a).amax()
+            );
+            assert!(
+                (&ne.g - &g).amax() < 1e-9 * g.amax().max(1.0),
+                "{roles:?}: g differs"
+            );
         }
     }
 }

@@ -89,7 +89,11 @@ pub fn iterate(
             evaluations += 1;
             if new_cost.is_finite() && new_cost < cost {
                 let predicted = -(2.0 * delta.dot(g) + delta.dot(&(a * &delta)));
-                let rho = if predicted > 0.0 { (cost - new_cost) / predicted } else { 0.0 };
+                let rho = if predicted > 0.0 {
+                    (cost - new_cost) / predicted
+                } else {
+                    0.0
+                };
                 state.lambda = (state.lambda * (1.0f64 / 3.0).max(1.0 - (2.0 * rho - 1.0).powi(3)))
                     .clamp(LAMBDA_MIN, LAMBDA_MAX);
                 state.nu = 2.0;

@@ -83,13 +83,22 @@ impl Default for FitSettings {
 impl FitSettings {
     fn validate(&self) -> Result<(), FitError> {
         if !(self.step_size.is_finite() && self.step_size > 0.0) {
-            return Err(FitError::Setting(format!("step size must be positive, got {}", self.step_size)));
+            return Err(FitError::Setting(format!(
+                "step size must be positive, got {}",
+                self.step_size
+            )));
         }
         if !(self.damping.is_finite() && self.damping >= 0.0) {
-            return Err(FitError::Setting(format!("damping must be zero or positive, got {}", self.damping)));
+            return Err(FitError::Setting(format!(
+                "damping must be zero or positive, got {}",
+                self.damping
+            )));
         }
         if !(self.tolerance.is_finite() && self.tolerance >= 0.0) {
-            return Err(FitError::Setting(format!("tolerance must be zero or positive, got {}", self.tolerance)));
+            return Err(FitError::Setting(format!(
+                "tolerance must be zero or positive, got {}",
+                self.tolerance
+            )));
         }
         Ok(())
     }
@@ -140,7 +149,8 @@ pub struct FitStats {
 impl FitStats {
     pub fn of(model: &Model, theta: &[f64]) -> Self {
         let ev = model.evaluate(theta);
-        let rms = |s: usize| (ev.count[s] > 0).then(|| (ev.sum_sq_m[s] / ev.count[s] as f64).sqrt());
+        let rms =
+            |s: usize| (ev.count[s] > 0).then(|| (ev.sum_sq_m[s] / ev.count[s] as f64).sqrt());
         Self {
             cost: ev.cost,
             // Two horizontal rows per fix: RMS of the 2-D distance.
@@ -244,7 +254,10 @@ impl Reconstruction {
     }
 
     fn has_segments(&self) -> bool {
-        self.model.effects().iter().any(|e| e.role() == Role::Segments)
+        self.model
+            .effects()
+            .iter()
+            .any(|e| e.role() == Role::Segments)
     }
 
     /// One iteration of the current phase. Does nothing once the fit is done.
@@ -258,13 +271,31 @@ impl Reconstruction {
         let free = self.mask(phase);
         let tol = self.settings.tolerance;
         let outcome = if phase == Phase::Step2 && self.settings.method == Method::Gd {
-            let scale: Vec<f64> = self.model.param_infos().iter().map(|(_, p)| p.scale).collect();
-            gd::iterate(&self.model, &mut self.theta, &free, &scale, &mut self.gd, tol)
+            let scale: Vec<f64> = self
+                .model
+                .param_infos()
+                .iter()
+                .map(|(_, p)| p.scale)
+                .collect();
+            gd::iterate(
+                &self.model,
+                &mut self.theta,
+                &free,
+                &scale,
+                &mut self.gd,
+                tol,
+            )
         } else if free.iter().any(|&f| f) {
             lm::iterate(&self.model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
             let c = self.model.cost(&self.theta);
-            StepOutcome { cost_before: c, cost: c, accepted: false, converged: true, evaluations: 1 }
+            StepOutcome {
+                cost_before: c,
+                cost: c,
+                accepted: false,
+                converged: true,
+                evaluations: 1,
+            }
         };
         self.iteration += 1;
         self.phase_iterations[slot] += 1;
@@ -280,7 +311,11 @@ impl Reconstruction {
         let report = IterationReport {
             iteration: self.iteration,
             phase,
-            method: if phase == Phase::Step1 { Method::Lm } else { self.settings.method },
+            method: if phase == Phase::Step1 {
+                Method::Lm
+            } else {
+                self.settings.method
+            },
             cost: outcome.cost,
             accepted: outcome.accepted,
             rms_horizontal_m: FitStats::of(&self.model, &self.theta).rms_horizontal_m,
@@ -312,7 +347,11 @@ impl Reconstruction {
         }
         let effects_changed = new.model.effects != self.settings.model.effects;
         if new.model != self.settings.model {
-            let model = Model::with_start(self.model.signals.clone(), new.model.clone(), self.model.start.clone())?;
+            let model = Model::with_start(
+                self.model.signals.clone(),
+                new.model.clone(),
+                self.model.start.clone(),
+            )?;
             check_observability(&model)?;
             self.theta = model.carry_over(&self.model, &self.theta);
             self.model = model;

@@ -14,8 +14,8 @@
 //! `(t_{k-1}, t_k]`, `Log(R_{k-1}^T R_k) / dt`, computed from the true
 //! attitudes: no integration scheme is shared with the model.
 
-pub mod route;
 pub mod rng;
+pub mod route;
 
 use std::fmt::Write as _;
 
@@ -23,8 +23,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
 
 use crate::geodesy::{Geodetic, LocalFrame};
-use route::Route;
 use rng::Rng;
+use route::Route;
 
 /// Effects the simulator can hide in a ride.
 pub const HIDDEN_EFFECTS: [&str; 5] = [
@@ -123,7 +123,11 @@ struct GaussMarkov {
 
 impl GaussMarkov {
     fn new(rng: &mut Rng, sigma: f64, tau: f64, dt: f64) -> Self {
-        Self { x: sigma * rng.normal(), a: (-dt / tau).exp(), sigma }
+        Self {
+            x: sigma * rng.normal(),
+            a: (-dt / tau).exp(),
+            sigma,
+        }
     }
 
     fn next(&mut self, rng: &mut Rng) -> f64 {
@@ -144,10 +148,16 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         }
     }
     if !(config.duration_s.is_finite() && config.duration_s >= 10.0) {
-        return Err(SimulationError::Setting(format!("duration must be at least 10 s, got {}", config.duration_s)));
+        return Err(SimulationError::Setting(format!(
+            "duration must be at least 10 s, got {}",
+            config.duration_s
+        )));
     }
     if !(config.rate_hz.is_finite() && (1.0..=10_000.0).contains(&config.rate_hz)) {
-        return Err(SimulationError::Setting(format!("rate must be 1..10000 Hz, got {}", config.rate_hz)));
+        return Err(SimulationError::Setting(format!(
+            "rate must be 1..10000 Hz, got {}",
+            config.rate_hz
+        )));
     }
     let mut rng = Rng::new(config.seed);
     let route = Route::plan(&mut rng, config.duration_s);
@@ -157,7 +167,11 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let states: Vec<route::State> = times.iter().map(|&t| route.state(t)).collect();
 
     // Sensor and environment parameters.
-    let origin = Geodetic::new(47.47 + rng.range(0.0, 0.05), 19.0 + rng.range(0.0, 0.08), rng.range(100.0, 160.0));
+    let origin = Geodetic::new(
+        47.47 + rng.range(0.0, 0.05),
+        19.0 + rng.range(0.0, 0.08),
+        rng.range(100.0, 160.0),
+    );
     let frame = LocalFrame::new(origin);
     let c_true = 2.105;
     let c_conf = c_true * (1.0 + rng.sign() * rng.range(0.01, 0.04));
@@ -172,12 +186,26 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let baro_drift = rng.sign() * rng.range(1.0, 4.0);
 
     let gps_lag = hidden_has(config, "gps_lag").then(|| rng.range(0.3, 1.2));
-    let scale = hidden_has(config, "gyro_scale")
-        .then(|| [rng.sign() * rng.range(0.02, 0.05), rng.sign() * rng.range(0.02, 0.05), rng.sign() * rng.range(0.02, 0.05)]);
-    let misalign = hidden_has(config, "mount_misalignment")
-        .then(|| [rng.sign() * rng.range(1.0, 3.0), rng.sign() * rng.range(2.0, 5.0), rng.sign() * rng.range(2.0, 5.0)]);
+    let scale = hidden_has(config, "gyro_scale").then(|| {
+        [
+            rng.sign() * rng.range(0.02, 0.05),
+            rng.sign() * rng.range(0.02, 0.05),
+            rng.sign() * rng.range(0.02, 0.05),
+        ]
+    });
+    let misalign = hidden_has(config, "mount_misalignment").then(|| {
+        [
+            rng.sign() * rng.range(1.0, 3.0),
+            rng.sign() * rng.range(2.0, 5.0),
+            rng.sign() * rng.range(2.0, 5.0),
+        ]
+    });
     let temp_coeff = hidden_has(config, "gyro_bias_channel:temp_c").then(|| {
-        [rng.sign() * rng.range(0.01, 0.03), rng.sign() * rng.range(0.01, 0.03), rng.sign() * rng.range(0.015, 0.03)]
+        [
+            rng.sign() * rng.range(0.01, 0.03),
+            rng.sign() * rng.range(0.01, 0.03),
+            rng.sign() * rng.range(0.015, 0.03),
+        ]
     });
     let mount = misalign.map_or(UnitQuaternion::identity(), |m| {
         UnitQuaternion::from_euler_angles(m[0].to_radians(), m[1].to_radians(), m[2].to_radians())
@@ -205,7 +233,11 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             let size = rng.range(10.0, 40.0);
             let dir = rng.range(0.0, std::f64::consts::TAU);
             episodes.push((start, start + len, size));
-            jumps.push(Vector3::new(size * dir.cos(), size * dir.sin(), 0.3 * size * rng.normal()));
+            jumps.push(Vector3::new(
+                size * dir.cos(),
+                size * dir.sin(),
+                0.3 * size * rng.normal(),
+            ));
         }
     }
 
@@ -220,9 +252,20 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let mut log = String::with_capacity(n * 48);
     let _ = writeln!(log, "# gyropath ride log");
     let _ = writeln!(log, "# wheel_circumference_m: {c_conf:.4}");
-    let _ = writeln!(log, "# generator: gyropath simulate --seed {} --duration {}", config.seed, config.duration_s);
-    let distance_col = if config.odometer { "odo_m" } else { "wheel_pulse" };
-    let _ = writeln!(log, "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m,baro_alt_m,temp_c");
+    let _ = writeln!(
+        log,
+        "# generator: gyropath simulate --seed {} --duration {}",
+        config.seed, config.duration_s
+    );
+    let distance_col = if config.odometer {
+        "odo_m"
+    } else {
+        "wheel_pulse"
+    };
+    let _ = writeln!(
+        log,
+        "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m,baro_alt_m,temp_c"
+    );
     let mut truth_csv = String::with_capacity(n * 44);
     let _ = writeln!(truth_csv, "t_s,lat_deg,lon_deg,alt_m");
 
@@ -239,7 +282,14 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         let st = &states[k];
         truth_enu.push(st.position);
         let g = frame.to_geodetic(&st.position);
-        let _ = writeln!(truth_csv, "{t:.td$},{:.9},{:.9},{:.3}", g.lat_deg, g.lon_deg, g.alt_m, td = t_decimals);
+        let _ = writeln!(
+            truth_csv,
+            "{t:.td$},{:.9},{:.9},{:.3}",
+            g.lat_deg,
+            g.lon_deg,
+            g.alt_m,
+            td = t_decimals
+        );
 
         // Gyro: exact mean body rate over the step, into the sensor frame.
         let temp = temperature(t);
@@ -248,7 +298,8 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         } else {
             let body = (states[k - 1].attitude.inverse() * st.attitude).scaled_axis() / dt;
             let sensor = mount.inverse() * body;
-            walk += Vector3::new(rng.normal(), rng.normal(), rng.normal()) * (bias_walk * dt.sqrt());
+            walk +=
+                Vector3::new(rng.normal(), rng.normal(), rng.normal()) * (bias_walk * dt.sqrt());
             let mut bias = bias0 + walk;
             if let Some(c) = temp_coeff {
                 bias += Vector3::new(c[0], c[1], c[2]) * (temp - temp_start);
@@ -258,7 +309,8 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             if let Some(s) = scale {
                 w = w.component_mul(&Vector3::new(1.0 + s[0], 1.0 + s[1], 1.0 + s[2]));
             }
-            (w + bias + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * noise_dps).map(|v| (v / lsb_dps).round() * lsb_dps)
+            (w + bias + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * noise_dps)
+                .map(|v| (v / lsb_dps).round() * lsb_dps)
         };
 
         // Distance.
@@ -278,11 +330,16 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         let mut fix = String::from(",,");
         if t + 0.5 * dt >= next_fix {
             next_fix += 1.0;
-            let noise = Vector3::new(gm[0].next(&mut rng), gm[1].next(&mut rng), gm[2].next(&mut rng))
-                + Vector3::new(0.5 * rng.normal(), 0.5 * rng.normal(), 1.5 * rng.normal());
+            let noise =
+                Vector3::new(
+                    gm[0].next(&mut rng),
+                    gm[1].next(&mut rng),
+                    gm[2].next(&mut rng),
+                ) + Vector3::new(0.5 * rng.normal(), 0.5 * rng.normal(), 1.5 * rng.normal());
             let in_outage = outages.iter().any(|&(a, b)| t >= a && t < b);
             if !in_outage {
-                let seen = gps_lag.map_or(st.position, |lag| route.state((t - lag).max(0.0)).position);
+                let seen =
+                    gps_lag.map_or(st.position, |lag| route.state((t - lag).max(0.0)).position);
                 let mut p = seen + noise;
                 for (e, j) in episodes.iter().zip(&jumps) {
                     if t >= e.0 && t < e.1 {
@@ -294,12 +351,20 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             }
         }
         let baro = if k % baro_every == 0 {
-            let v = st.position.z + origin.alt_m + baro_offset + baro_drift * t / 3600.0 + baro_gm.next(&mut rng);
+            let v = st.position.z
+                + origin.alt_m
+                + baro_offset
+                + baro_drift * t / 3600.0
+                + baro_gm.next(&mut rng);
             format!("{v:.2}")
         } else {
             String::new()
         };
-        let temp_field = if k % temp_every == 0 { format!("{:.2}", temp + 0.05 * rng.normal()) } else { String::new() };
+        let temp_field = if k % temp_every == 0 {
+            format!("{:.2}", temp + 0.05 * rng.normal())
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             log,
             "{t:.td$},{:.4},{:.4},{:.4},{distance_field},{fix},{baro},{temp_field}",
@@ -348,27 +413,45 @@ mod tests {
 
     #[test]
     fn a_simulated_ride_loads_and_has_what_it_promises() {
-        let ride = simulate(&SimConfig { duration_s: 300.0, ..SimConfig::default() }).unwrap();
+        let ride = simulate(&SimConfig {
+            duration_s: 300.0,
+            ..SimConfig::default()
+        })
+        .unwrap();
         let log = parse(ride.log_csv.as_bytes(), "sim.csv").unwrap();
         assert_eq!(log.len(), 30_001);
         let sig = Signals::from_log(&log).unwrap();
         // About one fix per second minus the outage.
         let outage: f64 = ride.truth.gps_outages_s.iter().map(|(a, b)| b - a).sum();
-        assert!((sig.fixes.len() as f64 - (301.0 - outage)).abs() < 3.0, "{} fixes", sig.fixes.len());
+        assert!(
+            (sig.fixes.len() as f64 - (301.0 - outage)).abs() < 3.0,
+            "{} fixes",
+            sig.fixes.len()
+        );
         // Wheel pulses, scaled by the configured circumference, give the distance within a revolution or two.
         let odo: f64 = sig.distance.iter().sum();
         let true_d = ride.truth.distance_m;
-        assert!((odo * ride.truth.odometer_gain - true_d).abs() < 2.0 * 2.105 + 0.01 * true_d, "{odo} vs {true_d}");
+        assert!(
+            (odo * ride.truth.odometer_gain - true_d).abs() < 2.0 * 2.105 + 0.01 * true_d,
+            "{odo} vs {true_d}"
+        );
         assert!(sig.channel("temp_c").is_some());
         // Deterministic.
-        let again = simulate(&SimConfig { duration_s: 300.0, ..SimConfig::default() }).unwrap();
+        let again = simulate(&SimConfig {
+            duration_s: 300.0,
+            ..SimConfig::default()
+        })
+        .unwrap();
         assert_eq!(again.log_csv, ride.log_csv);
     }
 
     #[test]
     fn gyro_integrates_to_the_true_heading() {
         // With the true bias removed, integrating the rates follows the true attitude.
-        let cfg = SimConfig { duration_s: 60.0, ..SimConfig::default() };
+        let cfg = SimConfig {
+            duration_s: 60.0,
+            ..SimConfig::default()
+        };
         let ride = simulate(&cfg).unwrap();
         let log = parse(ride.log_csv.as_bytes(), "sim.csv").unwrap();
         let route_start = {
@@ -406,7 +489,10 @@ impl SimulatedRide {
     /// True position of every row in the local frame of `signals`.
     pub fn truth_in(&self, frame: &LocalFrame) -> Vec<Vector3<f64>> {
         let sim = LocalFrame::new(self.origin);
-        self.truth_enu.iter().map(|p| frame.to_enu(&sim.to_geodetic(p))).collect()
+        self.truth_enu
+            .iter()
+            .map(|p| frame.to_enu(&sim.to_geodetic(p)))
+            .collect()
     }
 
     /// Compare a reconstructed path (one position per row, in `frame`) with the truth.
@@ -423,7 +509,12 @@ impl SimulatedRide {
         for (j, &t) in signals.t.iter().enumerate() {
             let e = h(&path[j], &truth[j]);
             all += e;
-            if self.truth.gps_outages_s.iter().any(|&(a, b)| t >= a && t < b) {
+            if self
+                .truth
+                .gps_outages_s
+                .iter()
+                .any(|&(a, b)| t >= a && t < b)
+            {
                 out += e;
                 n_out += 1;
             }

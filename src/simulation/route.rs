@@ -69,7 +69,13 @@ impl Route {
         let mut grade = Vec::new();
         let mut cruise = Vec::new();
         let mut stop_at: Vec<(usize, f64)> = Vec::new();
-        let push = |kappa: &mut Vec<f64>, grade: &mut Vec<f64>, cruise: &mut Vec<f64>, len: f64, k: f64, gr: f64, v: f64| {
+        let push = |kappa: &mut Vec<f64>,
+                    grade: &mut Vec<f64>,
+                    cruise: &mut Vec<f64>,
+                    len: f64,
+                    k: f64,
+                    gr: f64,
+                    v: f64| {
             for _ in 0..(len / DS).round() as usize {
                 kappa.push(k);
                 grade.push(gr);
@@ -82,27 +88,75 @@ impl Route {
             let v = rng.range(4.5, 7.5);
             let pick = rng.uniform();
             if pick < 0.42 {
-                push(&mut kappa, &mut grade, &mut cruise, rng.range(40.0, 250.0), 0.0, 0.0, v);
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    rng.range(40.0, 250.0),
+                    0.0,
+                    0.0,
+                    v,
+                );
                 if rng.uniform() < 0.3 {
                     stop_at.push((kappa.len() - 1, rng.range(10.0, 40.0)));
                 }
             } else if pick < 0.80 {
                 let r = rng.range(8.0, 60.0);
                 let angle = rng.range(30f64, 120.0).to_radians();
-                push(&mut kappa, &mut grade, &mut cruise, r * angle, rng.sign() / r, 0.0, v);
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    r * angle,
+                    rng.sign() / r,
+                    0.0,
+                    v,
+                );
             } else if pick < 0.90 {
                 // Roundabout (right-hand traffic): right in, counter-clockwise round, right out.
                 let r = rng.range(10.0, 18.0);
                 let exit = rng.range(90f64, 270.0).to_radians();
                 let flare = 45f64.to_radians();
-                push(&mut kappa, &mut grade, &mut cruise, 12.0 * flare, -1.0 / 12.0, 0.0, 4.0);
-                push(&mut kappa, &mut grade, &mut cruise, r * (exit + 2.0 * flare), 1.0 / r, 0.0, 4.0);
-                push(&mut kappa, &mut grade, &mut cruise, 12.0 * flare, -1.0 / 12.0, 0.0, 4.0);
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    12.0 * flare,
+                    -1.0 / 12.0,
+                    0.0,
+                    4.0,
+                );
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    r * (exit + 2.0 * flare),
+                    1.0 / r,
+                    0.0,
+                    4.0,
+                );
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    12.0 * flare,
+                    -1.0 / 12.0,
+                    0.0,
+                    4.0,
+                );
             } else {
                 // Bridge: ramp up, level span, ramp down.
                 let g = rng.range(0.03, 0.06);
                 push(&mut kappa, &mut grade, &mut cruise, 60.0, 0.0, g, v);
-                push(&mut kappa, &mut grade, &mut cruise, rng.range(30.0, 120.0), 0.0, 0.0, v);
+                push(
+                    &mut kappa,
+                    &mut grade,
+                    &mut cruise,
+                    rng.range(30.0, 120.0),
+                    0.0,
+                    0.0,
+                    v,
+                );
                 push(&mut kappa, &mut grade, &mut cruise, 60.0, 0.0, -g, v);
             }
         }
@@ -113,7 +167,9 @@ impl Route {
         let grade: Vec<f64> = smooth(&grade, (10.0 / DS) as usize)
             .iter()
             .enumerate()
-            .map(|(i, g)| g + 0.015 * (std::f64::consts::TAU * i as f64 * DS / hill_len + hill_phase).sin())
+            .map(|(i, g)| {
+                g + 0.015 * (std::f64::consts::TAU * i as f64 * DS / hill_len + hill_phase).sin()
+            })
             .collect();
         let cruise = smooth(&cruise, (20.0 / DS) as usize);
 
@@ -153,7 +209,8 @@ impl Route {
             psi[i] = psi[i - 1] + 0.5 * (kappa[i - 1] + kappa[i]) * DS;
             let pitch = (0.5 * (grade[i - 1] + grade[i])).atan();
             let h = 0.5 * (psi[i - 1] + psi[i]);
-            pos[i] = pos[i - 1] + Vector3::new(pitch.cos() * h.cos(), pitch.cos() * h.sin(), pitch.sin()) * DS;
+            pos[i] = pos[i - 1]
+                + Vector3::new(pitch.cos() * h.cos(), pitch.cos() * h.sin(), pitch.sin()) * DS;
         }
         Self {
             kappa,
@@ -179,7 +236,10 @@ impl Route {
 
     /// Arc length and speed at time `t`.
     fn s_at(&self, t: f64) -> (f64, f64) {
-        let k = self.knots.partition_point(|&(tk, _)| tk <= t).clamp(1, self.knots.len() - 1);
+        let k = self
+            .knots
+            .partition_point(|&(tk, _)| tk <= t)
+            .clamp(1, self.knots.len() - 1);
         let (t0, s0) = self.knots[k - 1];
         let (t1, s1) = self.knots[k];
         let f = ((t - t0) / (t1 - t0)).clamp(0.0, 1.0);

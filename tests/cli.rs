@@ -1,0 +1,149 @@
+//! The command line end to end: simulate, fit, outputs, exit codes.
+
+use std::path::Path;
+use std::process::Command;
+
+fn gyropath(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .args(args)
+        .output()
+        .expect("run gyropath")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn simulate_then_fit_writes_path_and_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    let truth = dir.path().join("truth.csv");
+    let out = gyropath(&[
+        "simulate",
+        "--seed",
+        "11",
+        "--duration",
+        "240",
+        "--out",
+        s(&ride),
+        "--truth",
+        s(&truth),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let path = dir.path().join("path.csv");
+    let report = dir.path().join("report.json");
+    let out = gyropath(&[
+        "fit",
+        s(&ride),
+        "--out",
+        s(&path),
+        "--report",
+        s(&report),
+        "--segment-s",
+        "10",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("rms       horizontal"), "{stdout}");
+    // Plain progress lines when stderr is not a terminal.
+    assert!(String::from_utf8_lossy(&out.stderr).contains("step 2 lm"));
+
+    let ride_rows = std::fs::read_to_string(&ride)
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .count()
+        - 1;
+    let text = std::fs::read_to_string(&path).unwrap();
+    let mut lines = text.lines();
+    assert!(
+        lines
+            .next()
+            .unwrap()
+            .starts_with("t_s,lat_deg,lon_deg,alt_m")
+    );
+    assert_eq!(lines.count(), ride_rows);
+    let truth_rows = std::fs::read_to_string(&truth).unwrap().lines().count() - 1;
+    assert_eq!(truth_rows, ride_rows);
+
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(json["stats"]["rms_horizontal_m"].as_f64().unwrap() < 5.0);
+    assert!(json["iterations_step1"].as_u64().unwrap() > 0);
+    assert!(json["iterations_step2"].as_u64().unwrap() > 0);
+    assert_eq!(json["model"][0], "initial_position");
+    assert!(
+        json["parameters"]["odometer_gain"][0]["value"]
+            .as_f64()
+            .unwrap()
+            > 0.9
+    );
+    assert_eq!(
+        json["parameters"]["gyro_bias_segments"]
+            .as_array()
+            .unwrap()
+            .len(),
+        3 * 24
+    );
+
+    // Never over the input log.
+    let out = gyropath(&["fit", s(&ride), "--out", s(&ride)]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refusing to write over the input"));
+}
+
+#[test]
+fn bad_input_fails_with_one_line_naming_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "t_s,gx_dps,gy_dps,gz_dps,odo_m,lat_deg,lon_deg\n0,0,0,0,0,47.5,19.0\n0.01,0,x,0,0.1,,\n",
+    )
+    .unwrap();
+    let out = gyropath(&["fit", s(&bad)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("bad.csv:3: column 'gy_dps': 'x' is not a number"),
+        "{err}"
+    );
+
+    let missing = dir.path().join("missing.csv");
+    let out = gyropath(&["fit", s(&missing)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.csv: cannot read"));
+
+    // A ride that never moves: the heading is unobservable, said so.
+    let still = dir.path().join("still.csv");
+    let mut text = String::from("t_s,gx_dps,gy_dps,gz_dps,odo_m,lat_deg,lon_deg\n");
+    for i in 0..3000 {
+        let fix = if i % 100 == 0 { "47.5,19.0" } else { "," };
+        text.push_str(&format!("{},0.01,0.02,0.03,0,{fix}\n", i as f64 * 0.01));
+    }
+    std::fs::write(&still, text).unwrap();
+    let out = gyropath(&["fit", s(&still)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("heading is unobservable"));
+}
+
+#[test]
+fn no_arguments_prints_usage() {
+    let out = gyropath(&[]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("Usage") && text.contains("fit") && text.contains("simulate"),
+        "{text}"
+    );
+}
