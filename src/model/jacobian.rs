@@ -31,39 +31,61 @@ pub struct Linearisation {
     pub columns: Vec<usize>,
 }
 
-impl Model {
-    /// Linearise the residuals at `theta` in the parameters where `free` is true.
-    pub fn linearise(&self, theta: &[f64], free: &[bool]) -> Linearisation {
-        let sig = &self.signals;
-        let np = self.n_params();
-        let columns: Vec<usize> = (0..np).filter(|&i| free[i]).collect();
-        let mut col_of = vec![usize::MAX; np];
-        for (c, &i) in columns.iter().enumerate() {
-            col_of[i] = c;
+/// The prefix sums `U_c`, `V_c`, `D_c` of every free parameter at the current row.
+pub(crate) struct PrefixSums {
+    pub u: Vec<Vector3<f64>>,
+    pub v: Vec<Vector3<f64>>,
+    pub d: Vec<Vector3<f64>>,
+    /// Free parameters that have acted so far, in the order they started.
+    pub active: Vec<usize>,
+    is_active: Vec<bool>,
+}
+
+impl PrefixSums {
+    fn new(np: usize) -> Self {
+        Self {
+            u: vec![Vector3::zeros(); np],
+            v: vec![Vector3::zeros(); np],
+            d: vec![Vector3::zeros(); np],
+            active: Vec::new(),
+            is_active: vec![false; np],
         }
-        let nr = self.n_residuals();
-        let mut jac = DMatrix::<f64>::zeros(nr, columns.len());
-        let mut res = DVector::<f64>::zeros(nr);
+    }
 
-        let mut u = vec![Vector3::zeros(); np];
-        let mut v = vec![Vector3::zeros(); np];
-        let mut dsum = vec![Vector3::zeros(); np];
-        let mut active: Vec<usize> = Vec::new();
-        let mut is_active = vec![false; np];
-        let mut activate = |i: usize, active: &mut Vec<usize>| {
-            if !is_active[i] {
-                is_active[i] = true;
-                active.push(i);
-            }
-        };
+    #[inline]
+    fn activate(&mut self, i: usize) {
+        if !self.is_active[i] {
+            self.is_active[i] = true;
+            self.active.push(i);
+        }
+    }
 
+    /// `dp_t / dc = U_c x p_t - V_c + D_c`.
+    #[inline]
+    pub fn dp(&self, i: usize, p: &Vector3<f64>) -> Vector3<f64> {
+        self.u[i].cross(p) - self.v[i] + self.d[i]
+    }
+}
+
+impl Model {
+    /// One forward sweep that keeps the prefix sums of the parameters where
+    /// `free` is true, calling `at_row(row, p_row, sums)` at every row that
+    /// holds an observation (after the row's own step is included).
+    pub(crate) fn prefix_sweep(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        mut at_row: impl FnMut(usize, &Vector3<f64>, &PrefixSums),
+    ) {
+        let sig = &self.signals;
+        let mut sums = PrefixSums::new(self.n_params());
         let (q0, p0, phi) = self.initial_state(theta);
         if let Some(e) = self.position {
             for a in 0..3 {
                 let i = self.offsets[e] + a;
                 if free[i] {
-                    dsum[i][a] = 1.0;
-                    activate(i, &mut active);
+                    sums.d[i][a] = 1.0;
+                    sums.activate(i);
                 }
             }
         }
@@ -72,50 +94,25 @@ impl Model {
             for a in 0..3 {
                 let i = self.offsets[e] + a;
                 if free[i] {
-                    u[i] = jl.column(a).into_owned();
-                    v[i] = u[i].cross(&p0);
-                    activate(i, &mut active);
+                    sums.u[i] = jl.column(a).into_owned();
+                    sums.v[i] = sums.u[i].cross(&p0);
+                    sums.activate(i);
                 }
             }
         }
-        let baro_col = self.baro.map(|e| col_of[self.offsets[e]]);
-        let baro = self.baro_offset(theta);
         let obs = &self.observations;
         let mut k = 0;
-        let mut dp = vec![Vector3::zeros(); np];
-        let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
-        let mut dchain = vec![0.0; self.distance_chain.len() + 1];
-
-        let mut emit = |row: usize,
-                        p: &Vector3<f64>,
-                        active: &[usize],
-                        u: &[Vector3<f64>],
-                        v: &[Vector3<f64>],
-                        dsum: &[Vector3<f64>],
-                        k: &mut usize| {
-            if *k >= obs.len() || obs[*k].row != row {
-                return;
-            }
-            for &i in active {
-                dp[i] = u[i].cross(p) - v[i] + dsum[i];
-            }
-            while *k < obs.len() && obs[*k].row == row {
-                let o = &obs[*k];
-                let target = if o.baro { o.target + baro } else { o.target };
-                res[*k] = o.w * (p[o.axis] - target);
-                for &i in active {
-                    jac[(*k, col_of[i])] = o.w * dp[i][o.axis];
+        let mut visit = |row: usize, p: &Vector3<f64>, sums: &PrefixSums| {
+            if k < obs.len() && obs[k].row == row {
+                at_row(row, p, sums);
+                while k < obs.len() && obs[k].row == row {
+                    k += 1;
                 }
-                if o.baro
-                    && let Some(c) = baro_col.filter(|&c| c != usize::MAX)
-                {
-                    jac[(*k, c)] = -o.w;
-                }
-                *k += 1;
             }
         };
-
-        emit(0, &p0, &active, &u, &v, &dsum, &mut k);
+        visit(0, &p0, &sums);
+        let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
+        let mut dchain = vec![0.0; self.distance_chain.len() + 1];
         let mut q = q0;
         let mut p = p0;
         let inc = self.spec.increment;
@@ -127,8 +124,8 @@ impl Model {
             let th = chain[self.gyro_chain.len()] * sig.dt[j];
             q *= inc.quaternion(&th);
             let rot = q.to_rotation_matrix();
-            let dir = rot * Vector3::x();
-            // World rotation per unit change of the final rate.
+            let dir = super::rotation::forward(&q);
+            // World rotation per unit change of the final rate, then back through the gyro chain.
             let mut down: Matrix3<f64> = rot.matrix() * inc.right_jacobian(&th) * sig.dt[j];
             for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
                 let part = self.effects[e].gyro_partials(self.params_of(e, theta), j, &chain[i]);
@@ -136,9 +133,9 @@ impl Model {
                     let idx = self.offsets[e] + c;
                     if free[idx] {
                         let w = down * col;
-                        u[idx] += w;
-                        v[idx] += w.cross(&p);
-                        activate(idx, &mut active);
+                        sums.u[idx] += w;
+                        sums.v[idx] += w.cross(&p);
+                        sums.activate(idx);
                     }
                 }
                 down *= part.d_in;
@@ -155,15 +152,55 @@ impl Model {
                 for &(c, dv) in part.params.as_slice() {
                     let idx = self.offsets[e] + c;
                     if free[idx] {
-                        dsum[idx] += dir * (scale * dv);
-                        activate(idx, &mut active);
+                        sums.d[idx] += dir * (scale * dv);
+                        sums.activate(idx);
                     }
                 }
                 scale *= part.d_in;
             }
             p += dir * d;
-            emit(j, &p, &active, &u, &v, &dsum, &mut k);
+            visit(j, &p, &sums);
         }
+    }
+
+    /// Linearise the residuals at `theta` in the parameters where `free` is true.
+    pub fn linearise(&self, theta: &[f64], free: &[bool]) -> Linearisation {
+        let np = self.n_params();
+        let columns: Vec<usize> = (0..np).filter(|&i| free[i]).collect();
+        let mut col_of = vec![usize::MAX; np];
+        for (c, &i) in columns.iter().enumerate() {
+            col_of[i] = c;
+        }
+        let nr = self.n_residuals();
+        let mut jac = DMatrix::<f64>::zeros(nr, columns.len());
+        let mut res = DVector::<f64>::zeros(nr);
+        let baro_col = self
+            .baro
+            .map(|e| col_of[self.offsets[e]])
+            .filter(|&c| c != usize::MAX);
+        let baro = self.baro_offset(theta);
+        let obs = &self.observations;
+        let mut k = 0;
+        let mut dp = vec![Vector3::zeros(); np];
+        self.prefix_sweep(theta, free, |row, p, sums| {
+            for &i in &sums.active {
+                dp[i] = sums.dp(i, p);
+            }
+            while k < obs.len() && obs[k].row == row {
+                let o = &obs[k];
+                let target = if o.baro { o.target + baro } else { o.target };
+                res[k] = o.w * (p[o.axis] - target);
+                for &i in &sums.active {
+                    jac[(k, col_of[i])] = o.w * dp[i][o.axis];
+                }
+                if o.baro
+                    && let Some(c) = baro_col
+                {
+                    jac[(k, c)] = -o.w;
+                }
+                k += 1;
+            }
+        });
 
         let prior = self.prior_rows(theta);
         let base = obs.len();

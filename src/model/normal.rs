@@ -17,10 +17,9 @@
 //! of O(rows x P^2): for a 30-minute ride with 5 s segments (1,080 bias
 //! parameters) that is the difference between seconds and milliseconds.
 
-use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use super::Model;
-use super::rotation::left_jacobian;
 
 type V9 = SVector<f64, 9>;
 type M9 = SMatrix<f64, 9, 9>;
@@ -120,24 +119,7 @@ impl Model {
         }
         let ng = globals.len();
 
-        // Forward sweep: prefix sums and, per observation, h_o, the global row and the partial block row.
-        let mut u = vec![Vector3::zeros(); np];
-        let mut v = vec![Vector3::zeros(); np];
-        let mut dsum = vec![Vector3::zeros(); np];
-        let (q0, p0, phi) = self.initial_state(theta);
-        if let Some(e) = self.position {
-            for a in 0..3 {
-                dsum[self.offsets[e] + a][a] = 1.0;
-            }
-        }
-        if let Some(e) = self.orientation {
-            let jl = left_jacobian(&phi);
-            for a in 0..3 {
-                let i = self.offsets[e] + a;
-                u[i] = jl.column(a).into_owned();
-                v[i] = u[i].cross(&p0);
-            }
-        }
+        // Forward sweep: per observation, h_o, the global row and the partial block row.
         let obs = &self.observations;
         let no = obs.len();
         let baro_param = self.baro.map(|e| self.offsets[e]).filter(|&i| free[i]);
@@ -146,31 +128,29 @@ impl Model {
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
         let mut r = DVector::<f64>::zeros(no);
-        let mut k = 0usize;
-        let max_block = blocks.iter().map(|b| b.params.len()).max().unwrap_or(0);
-        if max_block > 3 {
+        if blocks.iter().any(|b| b.params.len() > 3) {
             return None;
         }
-        let mut emit = |row: usize,
-                        p: &Vector3<f64>,
-                        u: &[Vector3<f64>],
-                        v: &[Vector3<f64>],
-                        dsum: &[Vector3<f64>],
-                        k: &mut usize| {
-            while *k < no && obs[*k].row == row {
-                let o = &obs[*k];
+        let mut k = 0usize;
+        let mut y: Vec<Vec<V9>> = blocks
+            .iter()
+            .map(|b| vec![V9::zeros(); b.params.len()])
+            .collect();
+        let mut last_sums_row = 0;
+        self.prefix_sweep(theta, free, |row, p, sums| {
+            while k < no && obs[k].row == row {
+                let o = &obs[k];
                 let a = o.axis;
                 let target = if o.baro { o.target + baro } else { o.target };
-                r[*k] = o.w * (p[a] - target);
-                let dp = |i: usize| u[i].cross(p) - v[i] + dsum[i];
+                r[k] = o.w * (p[a] - target);
                 for (g, &i) in globals.iter().enumerate() {
-                    jg[(*k, g)] = o.w * dp(i)[a];
+                    jg[(k, g)] = o.w * sums.dp(i, p)[a];
                 }
                 if o.baro
                     && let Some(i) = baro_param
                     && let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX)
                 {
-                    jg[(*k, g)] -= o.w;
+                    jg[(k, g)] -= o.w;
                 }
                 // h_o: w (row a of -[p]x, -e_a, e_a).
                 let mut hv = V9::zeros();
@@ -190,84 +170,33 @@ impl Model {
                 }
                 hv[3 + a] = -1.0;
                 hv[6 + a] = 1.0;
-                h[*k] = hv * o.w;
+                h[k] = hv * o.w;
                 let b = block_at[row];
                 if b != u32::MAX {
                     let mut vals = [0.0; 3];
                     for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
-                        vals[kk] = o.w * dp(i)[a];
+                        vals[kk] = o.w * sums.dp(i, p)[a];
                     }
-                    jb[*k] = (b, vals);
+                    jb[k] = (b, vals);
                 }
-                *k += 1;
+                k += 1;
             }
-        };
-        emit(0, &p0, &u, &v, &dsum, &mut k);
-        let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
-        let mut dchain = vec![0.0; self.distance_chain.len() + 1];
-        let mut q = q0;
-        let mut p = p0;
-        let inc = self.spec.increment;
-        for j in 1..sig.len() {
-            chain[0] = sig.gyro[j];
-            for (i, &e) in self.gyro_chain.iter().enumerate() {
-                chain[i + 1] = self.effects[e].gyro(self.params_of(e, theta), j, chain[i]);
-            }
-            let th = chain[self.gyro_chain.len()] * sig.dt[j];
-            q *= inc.quaternion(&th);
-            let rot = q.to_rotation_matrix();
-            let dir = rot * Vector3::x();
-            let mut down = rot.matrix() * inc.right_jacobian(&th) * sig.dt[j];
-            for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
-                let part = self.effects[e].gyro_partials(self.params_of(e, theta), j, &chain[i]);
-                for &(c, col) in part.params.as_slice() {
-                    let idx = self.offsets[e] + c;
-                    if free[idx] {
-                        let w = down * col;
-                        u[idx] += w;
-                        v[idx] += w.cross(&p);
-                    }
-                }
-                down *= part.d_in;
-            }
-            dchain[0] = sig.distance[j];
-            for (i, &e) in self.distance_chain.iter().enumerate() {
-                dchain[i + 1] = self.effects[e].distance(self.params_of(e, theta), j, dchain[i]);
-            }
-            let d = dchain[self.distance_chain.len()];
-            let mut scale = 1.0;
-            for (i, &e) in self.distance_chain.iter().enumerate().rev() {
-                let part =
-                    self.effects[e].distance_partials(self.params_of(e, theta), j, dchain[i]);
-                for &(c, dv) in part.params.as_slice() {
-                    let idx = self.offsets[e] + c;
-                    if free[idx] {
-                        dsum[idx] += dir * (scale * dv);
-                    }
-                }
-                scale *= part.d_in;
-            }
-            p += dir * d;
-            emit(j, &p, &u, &v, &dsum, &mut k);
-        }
-
-        // Final y_c of each block (9 x n).
-        let y: Vec<Vec<V9>> = blocks
-            .iter()
-            .map(|b| {
-                b.params
-                    .iter()
-                    .map(|&i| {
-                        V9::from_iterator(
-                            u[i].iter()
-                                .chain(v[i].iter())
-                                .chain(dsum[i].iter())
+            // y_c of blocks that ended before this row are final: record them.
+            for (b, block) in blocks.iter().enumerate() {
+                if block.last != usize::MAX && block.last >= last_sums_row && block.last < row {
+                    for (x, &i) in block.params.iter().enumerate() {
+                        y[b][x] = V9::from_iterator(
+                            sums.u[i]
+                                .iter()
+                                .chain(sums.v[i].iter())
+                                .chain(sums.d[i].iter())
                                 .copied(),
-                        )
-                    })
-                    .collect()
-            })
-            .collect();
+                        );
+                    }
+                }
+            }
+            last_sums_row = row;
+        });
 
         // Suffix moments after each block: first observation past its last step.
         let nb = blocks.len();
