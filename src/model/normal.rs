@@ -136,7 +136,7 @@ impl Model {
             .iter()
             .map(|b| vec![V9::zeros(); b.params.len()])
             .collect();
-        let mut last_sums_row = 0;
+        let mut next_block = 0;
         self.prefix_sweep(theta, free, |row, p, sums| {
             while k < no && obs[k].row == row {
                 let o = &obs[k];
@@ -181,21 +181,20 @@ impl Model {
                 }
                 k += 1;
             }
-            // y_c of blocks that ended before this row are final: record them.
-            for (b, block) in blocks.iter().enumerate() {
-                if block.last != usize::MAX && block.last >= last_sums_row && block.last < row {
-                    for (x, &i) in block.params.iter().enumerate() {
-                        y[b][x] = V9::from_iterator(
-                            sums.u[i]
-                                .iter()
-                                .chain(sums.v[i].iter())
-                                .chain(sums.d[i].iter())
-                                .copied(),
-                        );
-                    }
+            // y_c of blocks that ended before this row are final: record them
+            // (blocks are disjoint and sorted, so they end in order).
+            while next_block < blocks.len() && blocks[next_block].last < row {
+                for (x, &i) in blocks[next_block].params.iter().enumerate() {
+                    y[next_block][x] = V9::from_iterator(
+                        sums.u[i]
+                            .iter()
+                            .chain(sums.v[i].iter())
+                            .chain(sums.d[i].iter())
+                            .copied(),
+                    );
                 }
+                next_block += 1;
             }
-            last_sums_row = row;
         });
 
         // Suffix moments after each block: first observation past its last step.
