@@ -132,3 +132,18 @@ fn settings_change_between_iterations_without_starting_over() {
     assert!(fit.apply_settings(bad).is_err());
     assert_eq!(fit.settings().model.segment_s, 10.0);
 }
+
+/// A one-hour ride: a constant bias fitted to the whole hour from the start
+/// guess used to settle 557 m off (step 1 in a wrong basin, step 2 never
+/// recovered); step 1's growing window keeps it in the right one.
+#[test]
+fn an_hour_long_ride_converges_to_the_gps() {
+    let (sim, sig) = common::ride(3, 3600.0, &[]);
+    let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+    while fit.iterate().is_some() {}
+    let stats = fit.stats();
+    let e = sim.errors(&sig, &fit.trajectory().p);
+    eprintln!("{stats:?} {e:?}");
+    assert!(stats.rms_horizontal_m < 2.5, "{stats:?}");
+    assert!(e.path_at_fixes_m < e.fixes_m, "{e:?}");
+}

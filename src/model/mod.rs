@@ -277,6 +277,17 @@ impl Model {
         mask
     }
 
+    /// The same model seeing only the GPS rows up to `t_end` (log time). Step 1
+    /// fits on a growing window of the ride: a constant bias fitted to a whole
+    /// long ride from a rough start can settle far from the answer, while one
+    /// fitted to the first minutes and then extended stays in the right basin.
+    pub fn restricted(&self, t_end: f64) -> Result<Self, ModelError> {
+        let mut m = Self::with_start(self.signals.clone(), self.spec.clone(), self.start.clone())?;
+        let t = &self.signals.t;
+        m.observations.retain(|o| t[o.row] <= t_end);
+        Ok(m)
+    }
+
     /// Number of residual rows: observations then priors.
     pub fn n_residuals(&self) -> usize {
         self.observations.len() + self.n_prior

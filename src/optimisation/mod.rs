@@ -185,7 +185,12 @@ pub struct Reconstruction {
     phase_iterations: [usize; 2],
     settings_changed: bool,
     history: Vec<IterationReport>,
+    /// Step 1's growing window (s of ride) and its model; `None` once it covers the ride.
+    window: Option<(f64, Model)>,
 }
+
+/// Step 1's first window (s); it doubles each time the fit on it converges.
+const FIRST_WINDOW_S: f64 = 120.0;
 
 impl Reconstruction {
     /// Set up a fit of `settings.model` on `signals`, at the start guess.
@@ -194,7 +199,7 @@ impl Reconstruction {
         let model = Model::new(signals, settings.model.clone())?;
         check_observability(&model)?;
         let theta = model.initial_params();
-        Ok(Self {
+        Self {
             lm: LmState::new(settings.damping),
             gd: GdState::new(settings.step_size),
             model,
@@ -205,7 +210,23 @@ impl Reconstruction {
             phase_iterations: [0, 0],
             settings_changed: false,
             history: Vec::new(),
-        })
+            window: None,
+        }
+        .with_first_window()
+    }
+
+    /// Start step 1 on the first window of the ride, if the ride is longer.
+    fn with_first_window(mut self) -> Result<Self, FitError> {
+        self.window = self.next_window(FIRST_WINDOW_S)?;
+        Ok(self)
+    }
+
+    fn next_window(&self, length: f64) -> Result<Option<(f64, Model)>, FitError> {
+        let sig = &self.model.signals;
+        if length >= sig.duration() {
+            return Ok(None);
+        }
+        Ok(Some((length, self.model.restricted(sig.t[0] + length)?)))
     }
 
     pub fn model(&self) -> &Model {
@@ -286,7 +307,11 @@ impl Reconstruction {
                 tol,
             )
         } else if free.iter().any(|&f| f) {
-            lm::iterate(&self.model, &mut self.theta, &free, &mut self.lm, tol)
+            let model = match (&self.window, phase) {
+                (Some((_, m)), Phase::Step1) => m,
+                _ => &self.model,
+            };
+            lm::iterate(model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
             let c = self.model.cost(&self.theta);
             StepOutcome {
@@ -299,6 +324,18 @@ impl Reconstruction {
         };
         self.iteration += 1;
         self.phase_iterations[slot] += 1;
+        if phase == Phase::Step1
+            && let Some((length, _)) = &self.window
+            && outcome.converged
+        {
+            // Widen the window and keep fitting step 1.
+            let length = *length;
+            if let Ok(next) = self.next_window(2.0 * length) {
+                self.window = next;
+                self.lm = LmState::new(self.settings.damping);
+                return Some(self.report(phase, outcome, false));
+            }
+        }
         let finished = outcome.converged || self.phase_iterations[slot] >= self.settings.max_iter;
         if finished {
             self.phase = match phase {
@@ -308,6 +345,10 @@ impl Reconstruction {
             self.lm = LmState::new(self.settings.damping);
             self.gd = GdState::new(self.settings.step_size);
         }
+        Some(self.report(phase, outcome, finished))
+    }
+
+    fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
         let report = IterationReport {
             iteration: self.iteration,
             phase,
@@ -325,7 +366,7 @@ impl Reconstruction {
             phase_finished: finished,
         };
         self.history.push(report.clone());
-        Some(report)
+        report
     }
 
     /// Iterate until done, reporting each iteration to `observer`.
@@ -365,6 +406,7 @@ impl Reconstruction {
         if effects_changed {
             self.phase = Phase::Step1;
             self.phase_iterations = [0, 0];
+            self.window = None;
         } else if self.phase == Phase::Done && self.has_segments() {
             self.phase = Phase::Step2;
             self.phase_iterations[1] = 0;
