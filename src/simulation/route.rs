@@ -45,6 +45,25 @@ pub struct State {
     pub attitude: UnitQuaternion<f64>,
 }
 
+/// Curvature, grade and cruising speed along the route, one value per grid point.
+#[derive(Default)]
+struct Plan {
+    kappa: Vec<f64>,
+    grade: Vec<f64>,
+    cruise: Vec<f64>,
+}
+
+impl Plan {
+    /// Append `len` metres of constant curvature `k`, grade `g` and cruising speed `v`.
+    fn push(&mut self, len: f64, k: f64, g: f64, v: f64) {
+        for _ in 0..(len / DS).round() as usize {
+            self.kappa.push(k);
+            self.grade.push(g);
+            self.cruise.push(v);
+        }
+    }
+}
+
 fn smooth(v: &[f64], window: usize) -> Vec<f64> {
     let n = v.len();
     let half = window / 2;
@@ -65,101 +84,43 @@ impl Route {
     /// Plan a route long enough for `duration` seconds of riding.
     pub fn plan(rng: &mut Rng, duration: f64) -> Self {
         let target = duration * 9.0 + 500.0;
-        let mut kappa = Vec::new();
-        let mut grade = Vec::new();
-        let mut cruise = Vec::new();
+        let mut plan = Plan::default();
         let mut stop_at: Vec<(usize, f64)> = Vec::new();
-        let push = |kappa: &mut Vec<f64>,
-                    grade: &mut Vec<f64>,
-                    cruise: &mut Vec<f64>,
-                    len: f64,
-                    k: f64,
-                    gr: f64,
-                    v: f64| {
-            for _ in 0..(len / DS).round() as usize {
-                kappa.push(k);
-                grade.push(gr);
-                cruise.push(v);
-            }
-        };
         // Start on a straight.
-        push(&mut kappa, &mut grade, &mut cruise, 60.0, 0.0, 0.0, 5.5);
-        while (kappa.len() as f64) * DS < target {
+        plan.push(60.0, 0.0, 0.0, 5.5);
+        while (plan.kappa.len() as f64) * DS < target {
             let v = rng.range(4.5, 7.5);
             let pick = rng.uniform();
             if pick < 0.42 {
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    rng.range(40.0, 250.0),
-                    0.0,
-                    0.0,
-                    v,
-                );
+                plan.push(rng.range(40.0, 250.0), 0.0, 0.0, v);
                 if rng.uniform() < 0.3 {
-                    stop_at.push((kappa.len() - 1, rng.range(10.0, 40.0)));
+                    stop_at.push((plan.kappa.len() - 1, rng.range(10.0, 40.0)));
                 }
             } else if pick < 0.80 {
                 let r = rng.range(8.0, 60.0);
                 let angle = rng.range(30f64, 120.0).to_radians();
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    r * angle,
-                    rng.sign() / r,
-                    0.0,
-                    v,
-                );
+                plan.push(r * angle, rng.sign() / r, 0.0, v);
             } else if pick < 0.90 {
                 // Roundabout (right-hand traffic): right in, counter-clockwise round, right out.
                 let r = rng.range(10.0, 18.0);
                 let exit = rng.range(90f64, 270.0).to_radians();
                 let flare = 45f64.to_radians();
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    12.0 * flare,
-                    -1.0 / 12.0,
-                    0.0,
-                    4.0,
-                );
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    r * (exit + 2.0 * flare),
-                    1.0 / r,
-                    0.0,
-                    4.0,
-                );
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    12.0 * flare,
-                    -1.0 / 12.0,
-                    0.0,
-                    4.0,
-                );
+                plan.push(12.0 * flare, -1.0 / 12.0, 0.0, 4.0);
+                plan.push(r * (exit + 2.0 * flare), 1.0 / r, 0.0, 4.0);
+                plan.push(12.0 * flare, -1.0 / 12.0, 0.0, 4.0);
             } else {
                 // Bridge: ramp up, level span, ramp down.
                 let g = rng.range(0.03, 0.06);
-                push(&mut kappa, &mut grade, &mut cruise, 60.0, 0.0, g, v);
-                push(
-                    &mut kappa,
-                    &mut grade,
-                    &mut cruise,
-                    rng.range(30.0, 120.0),
-                    0.0,
-                    0.0,
-                    v,
-                );
-                push(&mut kappa, &mut grade, &mut cruise, 60.0, 0.0, -g, v);
+                plan.push(60.0, 0.0, g, v);
+                plan.push(rng.range(30.0, 120.0), 0.0, 0.0, v);
+                plan.push(60.0, 0.0, -g, v);
             }
         }
+        let Plan {
+            kappa,
+            grade,
+            cruise,
+        } = plan;
         let n = kappa.len();
         let kappa = smooth(&kappa, (4.0 / DS) as usize);
         let hill_phase = rng.range(0.0, std::f64::consts::TAU);
