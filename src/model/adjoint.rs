@@ -24,7 +24,11 @@ use super::rotation::left_jacobian;
 impl Model {
     /// Cost and its gradient with respect to every parameter.
     pub fn gradient(&self, theta: &[f64]) -> (f64, Vec<f64>) {
-        let path = self.trajectory(theta);
+        // The corrected signals with every chain stage kept: the path is built
+        // from them and the back-propagation below needs the stage inputs.
+        let (rates, rate_inputs) = self.corrected_rates(theta, true);
+        let (dist, dist_inputs) = self.corrected_distances(theta, true);
+        let path = self.trajectory_corrected(theta, &rates, &dist);
         let sig = &self.signals;
         let n = sig.len();
         let mut grad = vec![0.0; self.n_params()];
@@ -65,7 +69,6 @@ impl Model {
             g_dist[j] = a.dot(&dir);
         }
         take_row(0, &mut a, &mut k, &mut cost);
-        let (_, rate_inputs) = self.corrected_rates(theta, true);
         for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
             let r = self.range(e);
             self.effects[e].gyro_backward(
@@ -75,7 +78,6 @@ impl Model {
                 &mut grad[r],
             );
         }
-        let (_, dist_inputs) = self.corrected_distances(theta, true);
         for (i, &e) in self.distance_chain.iter().enumerate().rev() {
             let r = self.range(e);
             self.effects[e].distance_backward(

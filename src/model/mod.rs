@@ -102,15 +102,6 @@ pub(crate) struct Observation {
     pub baro: bool,
 }
 
-/// Kind of a residual row (for splitting RMS figures).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum RowKind {
-    Horizontal,
-    GpsUp,
-    BaroUp,
-    Prior,
-}
-
 /// A model: the ride's signals, the effects acting on them and where each
 /// effect's parameters sit in the parameter vector.
 #[derive(Debug)]
@@ -291,19 +282,6 @@ impl Model {
     /// Number of residual rows: observations then priors.
     pub fn n_residuals(&self) -> usize {
         self.observations.len() + self.n_prior
-    }
-
-    /// Kind of each residual row.
-    pub fn row_kinds(&self) -> Vec<RowKind> {
-        self.observations
-            .iter()
-            .map(|o| match (o.axis, o.baro) {
-                (2, true) => RowKind::BaroUp,
-                (2, false) => RowKind::GpsUp,
-                _ => RowKind::Horizontal,
-            })
-            .chain(std::iter::repeat_n(RowKind::Prior, self.n_prior))
-            .collect()
     }
 
     /// Parameters for this model from a fit of another model on the same ride:

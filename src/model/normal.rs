@@ -109,6 +109,9 @@ impl Model {
                 return None;
             }
         }
+        if blocks.iter().any(|b| b.params.len() > 3) {
+            return None;
+        }
         let mut block_at = vec![u32::MAX; sig.len()];
         for (b, block) in blocks.iter().enumerate() {
             if block.first != usize::MAX {
@@ -128,9 +131,6 @@ impl Model {
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
         let mut r = DVector::<f64>::zeros(no);
-        if blocks.iter().any(|b| b.params.len() > 3) {
-            return None;
-        }
         let mut k = 0usize;
         let mut y: Vec<Vec<V9>> = blocks
             .iter()

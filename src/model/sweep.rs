@@ -59,14 +59,26 @@ impl Model {
     pub(crate) fn sweep(
         &self,
         theta: &[f64],
+        visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
+    ) {
+        let (rates, _) = self.corrected_rates(theta, false);
+        let (dist, _) = self.corrected_distances(theta, false);
+        self.sweep_corrected(theta, &rates, &dist, visit);
+    }
+
+    /// Eq. 1-4 from already corrected rates and distances (see [`sweep`](Model::sweep)).
+    #[inline]
+    fn sweep_corrected(
+        &self,
+        theta: &[f64],
+        rates: &[Vector3<f64>],
+        dist: &[f64],
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
         let (mut q, mut p, _) = self.initial_state(theta);
         let inc = self.spec.increment;
         visit(0, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
-        let (rates, _) = self.corrected_rates(theta, false);
-        let (dist, _) = self.corrected_distances(theta, false);
         for j in 1..sig.len() {
             let th = rates[j] * sig.dt[j];
             q *= inc.quaternion(&th);
@@ -78,6 +90,18 @@ impl Model {
 
     /// The full path for `theta`.
     pub fn trajectory(&self, theta: &[f64]) -> Trajectory {
+        let (rates, _) = self.corrected_rates(theta, false);
+        let (dist, _) = self.corrected_distances(theta, false);
+        self.trajectory_corrected(theta, &rates, &dist)
+    }
+
+    /// The full path from already corrected rates and distances.
+    pub(crate) fn trajectory_corrected(
+        &self,
+        theta: &[f64],
+        rates: &[Vector3<f64>],
+        dist: &[f64],
+    ) -> Trajectory {
         let n = self.signals.len();
         let mut t = Trajectory {
             q: Vec::with_capacity(n),
@@ -85,7 +109,7 @@ impl Model {
             theta: Vec::with_capacity(n),
             d: Vec::with_capacity(n),
         };
-        self.sweep(theta, |_, q, p, th, d| {
+        self.sweep_corrected(theta, rates, dist, |_, q, p, th, d| {
             t.q.push(*q);
             t.p.push(*p);
             t.theta.push(*th);
