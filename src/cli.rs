@@ -32,6 +32,14 @@ pub enum Command {
     Fit(FitArgs),
     /// Write a simulated bicycle ride (and its true path).
     Simulate(SimulateArgs),
+    /// Open the app on a ride log (without arguments, `gyropath` opens it on the bundled sample).
+    Open(OpenArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct OpenArgs {
+    /// Ride log (CSV, see the shared ride-log format).
+    pub ride: PathBuf,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]

@@ -95,6 +95,49 @@ pub fn write_path_csv(
     Ok(())
 }
 
+/// Write the reconstructed path as a GPX 1.1 track (for map tools), at most
+/// 10 points per second of ride (a 100 Hz path at full rate only bloats the file).
+/// Log time goes into each point's `<extensions><t_s>`, since the log carries
+/// no absolute date.
+pub fn write_path_gpx(
+    out: &mut dyn Write,
+    model: &Model,
+    path: &Trajectory,
+) -> std::io::Result<()> {
+    let sig = &model.signals;
+    let name = xml_escape(&sig.source);
+    writeln!(out, r#"<?xml version="1.0" encoding="UTF-8"?>"#)?;
+    writeln!(
+        out,
+        r#"<gpx version="1.1" creator="gyropath" xmlns="http://www.topografix.com/GPX/1/1">"#
+    )?;
+    writeln!(
+        out,
+        "  <trk>\n    <name>{name} (gyropath)</name>\n    <trkseg>"
+    )?;
+    let mut last_t = f64::NEG_INFINITY;
+    for j in 0..sig.len() {
+        if sig.t[j] - last_t < 0.1 - 1e-9 && j + 1 != sig.len() {
+            continue;
+        }
+        last_t = sig.t[j];
+        let g = sig.frame.to_geodetic(&path.p[j]);
+        writeln!(
+            out,
+            r#"      <trkpt lat="{:.9}" lon="{:.9}"><ele>{:.3}</ele><extensions><t_s>{}</t_s></extensions></trkpt>"#,
+            g.lat_deg, g.lon_deg, g.alt_m, sig.t[j]
+        )?;
+    }
+    writeln!(out, "    </trkseg>\n  </trk>\n</gpx>")
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
 /// One fitted parameter, in the units it is shown in.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct ParamValue {
@@ -157,5 +200,34 @@ impl FitReport {
             .iter()
             .find(|p| p.name == name)
             .map(|p| p.value)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelSpec;
+    use std::sync::Arc;
+
+    #[test]
+    fn gpx_has_one_point_per_tenth_of_a_second_with_lat_lon() {
+        let sig = Arc::new(crate::testing::winding_signals(20.0, 100.0));
+        let model = Model::new(sig, ModelSpec::default()).expect("model");
+        let traj = model.trajectory(&model.initial_params());
+        let mut buf = Vec::new();
+        write_path_gpx(&mut buf, &model, &traj).expect("write");
+        let text = String::from_utf8(buf).expect("utf8");
+        assert!(text.starts_with("<?xml") && text.trim_end().ends_with("</gpx>"));
+        let points = text.matches("<trkpt ").count();
+        assert!((200..=202).contains(&points), "{points} points");
+        let first = text
+            .lines()
+            .find(|l| l.contains("<trkpt"))
+            .expect("a point");
+        let g = model.signals.frame.to_geodetic(&traj.p[0]);
+        assert!(
+            first.contains(&format!("lat=\"{:.9}\"", g.lat_deg)),
+            "{first}"
+        );
     }
 }

@@ -9,12 +9,17 @@
 //! - [`effects`]: one module per physical effect (parameters, where it acts, derivatives).
 //! - [`model`]: the path equations, residuals, cost, O(N) gradient and Jacobian.
 //! - [`optimisation`]: step 1 (globals, LM) and step 2 (segment biases, GD or LM), one iteration at a time.
+//! - [`diagnosis`]: residuals along/across the track, bias per segment, held-out error.
 //! - [`export`]: reconstructed path CSV and JSON report.
+//! - `app` (feature `app`, on by default): the eframe desktop app; draws what the core computes.
 //! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
 
 // Index loops over rows and axes read like the equations they implement.
 #![allow(clippy::needless_range_loop)]
 
+#[cfg(feature = "app")]
+pub mod app;
+pub mod diagnosis;
 pub mod effects;
 pub mod export;
 pub mod geodesy;

@@ -1,22 +1,32 @@
-//! gyropath command line (the app comes later; without arguments this prints usage).
+//! gyropath: the app without arguments (or `gyropath open RIDE.csv`), else the command line.
 
 mod cli;
 
-use clap::{CommandFactory, Parser};
+use clap::Parser;
 
 fn main() {
     let args = cli::Cli::parse();
     let result = match &args.command {
         Some(cli::Command::Fit(a)) => cli::fit(a),
         Some(cli::Command::Simulate(a)) => cli::simulate(a),
-        None => {
-            let _ = cli::Cli::command().print_help();
-            println!();
-            return;
-        }
+        Some(cli::Command::Open(a)) => open_app(Some(a.ride.clone())),
+        None => open_app(None),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
+}
+
+#[cfg(feature = "app")]
+fn open_app(ride: Option<std::path::PathBuf>) -> anyhow::Result<()> {
+    gyropath::app::run(ride).map_err(|e| anyhow::anyhow!("cannot open the app window: {e}"))
+}
+
+#[cfg(not(feature = "app"))]
+fn open_app(_ride: Option<std::path::PathBuf>) -> anyhow::Result<()> {
+    use clap::CommandFactory;
+    let _ = cli::Cli::command().print_help();
+    println!();
+    anyhow::bail!("this build has no app (built without the `app` feature); use a subcommand")
 }

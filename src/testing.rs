@@ -70,3 +70,16 @@ pub fn winding_log(duration: f64, rate_hz: f64) -> RideLog {
 pub fn winding_signals(duration: f64, rate_hz: f64) -> Signals {
     Signals::from_log(&winding_log(duration, rate_hz)).expect("synthetic log is valid")
 }
+
+/// Signals of a simulated ride (`hidden`: effect ids of the simulator).
+pub fn simulated_signals(seed: u64, duration_s: f64, hidden: &[&str]) -> Signals {
+    let sim = crate::simulation::simulate(&crate::simulation::SimConfig {
+        seed,
+        duration_s,
+        hidden: hidden.iter().map(|s| s.to_string()).collect(),
+        ..Default::default()
+    })
+    .expect("simulate");
+    Signals::from_log(&crate::loading::parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
+        .expect("signals")
+}

@@ -11,7 +11,7 @@ use crate::model::StartGuess;
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GyroBias;
 
-pub(crate) const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
+pub const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
 
 impl Effect for GyroBias {
     fn id(&self) -> String {

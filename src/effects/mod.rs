@@ -25,6 +25,7 @@ mod initial_position;
 mod odometer_gain;
 
 pub use baro_offset::BaroOffset;
+pub use gyro_bias::DEG_PER_RAD;
 pub use gyro_bias::GyroBias;
 pub use gyro_bias_segments::GyroBiasSegments;
 pub use initial_orientation::InitialOrientation;
@@ -300,6 +301,53 @@ pub const REGISTRY: [&str; 6] = [
     "gyro_bias_segments",
     "baro_offset",
 ];
+
+/// Effects a user can add to the paper's model, with one line on what each
+/// models; `gyro_bias_channel:<c>` once per extra channel of the log.
+pub fn catalogue(channels: &[String]) -> Vec<(String, String)> {
+    let mut out: Vec<(String, String)> = CATALOGUE
+        .iter()
+        .filter(|(id, _)| known(id))
+        .map(|(id, about)| (id.to_string(), about.to_string()))
+        .collect();
+    if known_prefix(CHANNEL_PREFIX) {
+        for c in channels {
+            out.push((
+                format!("{CHANNEL_PREFIX}{c}"),
+                format!("gyro bias linear in the log's {c} channel (3 per-axis slopes)"),
+            ));
+        }
+    }
+    out
+}
+
+/// Prefix of the per-channel bias effect ids.
+pub const CHANNEL_PREFIX: &str = "gyro_bias_channel:";
+
+/// The effect catalogue: ids and what they model.
+const CATALOGUE: [(&str, &str); 5] = [
+    ("gyro_scale", "per-axis gyro scale-factor error (3)"),
+    (
+        "gps_lag",
+        "GPS fixes refer to an earlier instant than their row time (1, s)",
+    ),
+    (
+        "mount_misalignment",
+        "sensor axes rotated from the vehicle's forward axis (2: yaw and pitch of the forward axis)",
+    ),
+    (
+        "baro_drift",
+        "barometric altitude drifting linearly in time (1, m/h)",
+    ),
+    (
+        "gps_outliers",
+        "robust (Cauchy) loss that stops multipath jumps bending the path",
+    ),
+];
+
+fn known_prefix(prefix: &str) -> bool {
+    REGISTRY.iter().any(|r| r.starts_with(prefix))
+}
 
 fn known(id: &str) -> bool {
     REGISTRY.contains(&id)

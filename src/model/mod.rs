@@ -325,6 +325,11 @@ impl Model {
         (q0, self.start.position + dp, phi)
     }
 
+    /// Whether the model fits a barometer offset (vertical rows use the barometer).
+    pub fn has_baro_offset(&self) -> bool {
+        self.baro.is_some()
+    }
+
     pub(crate) fn baro_offset(&self, theta: &[f64]) -> f64 {
         self.baro
             .and_then(|e| self.effects[e].baro_offset(self.params_of(e, theta)))

@@ -1,0 +1,276 @@
+//! The four plots: map, cost curve, bias per segment, residuals over time.
+//!
+//! Drawing only: everything here comes from the worker's [`Snapshot`] and the
+//! loaded [`RideView`]. The time plots share one x axis and cursor
+//! (`link_axis` / `link_cursor`); hovering any of them sets the time that the
+//! map marks.
+
+use egui::{Color32, Id};
+use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine};
+
+use super::worker::{RideView, Snapshot};
+
+const GPS: Color32 = Color32::from_rgb(120, 160, 255);
+const PATH: Color32 = Color32::from_rgb(255, 200, 60);
+const OUTAGE: Color32 = Color32::from_rgb(255, 110, 200);
+const AXES: [Color32; 3] = [
+    Color32::from_rgb(240, 90, 90),
+    Color32::from_rgb(90, 200, 110),
+    Color32::from_rgb(110, 150, 255),
+];
+/// Residual colour scale (m): below each bound the colour of the same index.
+const RESIDUAL_BINS: [(f64, Color32); 4] = [
+    (1.0, Color32::from_rgb(80, 200, 120)),
+    (2.5, Color32::from_rgb(200, 220, 80)),
+    (5.0, Color32::from_rgb(255, 160, 60)),
+    (f64::INFINITY, Color32::from_rgb(240, 60, 60)),
+];
+
+fn time_group() -> Id {
+    Id::unique("gyropath-time-axis")
+}
+
+/// Runs of consecutive points with the same key, each run sharing its first point
+/// with the previous run's last so the drawn line has no gaps.
+fn runs<K: PartialEq + Copy>(
+    points: &[[f64; 3]],
+    key: impl Fn(usize) -> K,
+) -> Vec<(K, Vec<[f64; 2]>)> {
+    let mut out: Vec<(K, Vec<[f64; 2]>)> = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        let k = key(i);
+        match out.last_mut() {
+            Some((last, run)) if *last == k => run.push([p[1], p[2]]),
+            _ => {
+                let mut run = Vec::new();
+                if i > 0 {
+                    run.push([points[i - 1][1], points[i - 1][2]]);
+                }
+                run.push([p[1], p[2]]);
+                out.push((k, run));
+            }
+        }
+    }
+    out
+}
+
+/// Index of the entry of `ts` (sorted) nearest to `t`.
+pub fn nearest(ts: impl Fn(usize) -> f64, len: usize, t: f64) -> Option<usize> {
+    if len == 0 {
+        return None;
+    }
+    let (mut lo, mut hi) = (0, len);
+    while lo < hi {
+        let mid = (lo + hi) / 2;
+        if ts(mid) < t {
+            lo = mid + 1;
+        } else {
+            hi = mid;
+        }
+    }
+    let i = lo.min(len - 1);
+    if i > 0 && (ts(i - 1) - t).abs() < (ts(i) - t).abs() {
+        Some(i - 1)
+    } else {
+        Some(i)
+    }
+}
+
+/// GPS fixes and reconstructed path in local metres, equal aspect.
+pub fn map_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: Option<&Snapshot>,
+    colour_by_residual: bool,
+    hover_t: Option<f64>,
+) {
+    Plot::new("map")
+        .data_aspect(1.0)
+        .legend(Legend::default())
+        .x_axis_label("east (m)")
+        .y_axis_label("north (m)")
+        .show(ui, |plot| {
+            let fixes: PlotPoints = ride.fixes.iter().map(|f| [f[1], f[2]]).collect();
+            plot.points(
+                Points::new("GPS fixes", fixes)
+                    .color(GPS)
+                    .radius(1.5)
+                    .shape(MarkerShape::Circle),
+            );
+            let Some(snap) = snap else {
+                return;
+            };
+            let in_outage = |t: f64| ride.outages.iter().any(|&(a, b)| t > a && t < b);
+            if colour_by_residual && !snap.residuals.is_empty() {
+                let res = &snap.residuals;
+                let bin = |i: usize| {
+                    let t = snap.path[i][0];
+                    let r =
+                        nearest(|k| res[k].t, res.len(), t).map_or(0.0, |k| res[k].horizontal());
+                    RESIDUAL_BINS.iter().position(|(b, _)| r < *b).unwrap_or(3)
+                };
+                for (b, run) in runs(&snap.path, bin) {
+                    let (bound, colour) = RESIDUAL_BINS[b];
+                    let name = if bound.is_finite() {
+                        format!("path, residual < {bound} m")
+                    } else {
+                        "path, residual >= 5 m".to_string()
+                    };
+                    plot.line(Line::new(name, run).color(colour).width(2.0));
+                }
+            } else {
+                for (outage, run) in runs(&snap.path, |i| in_outage(snap.path[i][0])) {
+                    let (name, colour) = if outage {
+                        ("path in GPS outage", OUTAGE)
+                    } else {
+                        ("reconstructed path", PATH)
+                    };
+                    plot.line(Line::new(name, run).color(colour).width(2.0));
+                }
+            }
+            if let Some(t) = hover_t
+                && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
+            {
+                let p = snap.path[i];
+                plot.points(
+                    Points::new(format!("t = {:.1} s", t - ride.t0), vec![[p[1], p[2]]])
+                        .color(Color32::WHITE)
+                        .radius(6.0)
+                        .shape(MarkerShape::Diamond),
+                );
+                if let Some(k) = nearest(|k| ride.fixes[k][0], ride.fixes.len(), t)
+                    && (ride.fixes[k][0] - t).abs() < 1.5
+                {
+                    let f = ride.fixes[k];
+                    plot.line(
+                        Line::new("residual at cursor", vec![[p[1], p[2]], [f[1], f[2]]])
+                            .color(Color32::WHITE)
+                            .style(LineStyle::dashed_dense()),
+                    );
+                }
+            }
+        });
+}
+
+/// Cost per iteration, log scale, with settings changes and phase ends marked.
+pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
+    Plot::new("cost")
+        .height(height)
+        .legend(Legend::default())
+        .x_axis_label("iteration")
+        .y_axis_formatter(|mark, _| format!("{:.0e}", 10f64.powf(mark.value)))
+        .show(ui, |plot| {
+            let pts: PlotPoints = snap
+                .history
+                .iter()
+                .filter(|r| r.cost > 0.0 && r.cost.is_finite())
+                .map(|r| [r.iteration as f64, r.cost.log10()])
+                .collect();
+            plot.line(Line::new("cost", pts).color(PATH).width(2.0));
+            for r in &snap.history {
+                if r.settings_changed {
+                    plot.vline(
+                        VLine::new("settings changed", r.iteration as f64 - 0.5)
+                            .color(Color32::LIGHT_RED)
+                            .style(LineStyle::dashed_loose()),
+                    );
+                }
+                if r.phase_finished {
+                    plot.vline(
+                        VLine::new("end of a step", r.iteration as f64 + 0.5).color(Color32::GRAY),
+                    );
+                }
+            }
+        });
+}
+
+/// What hovering a time plot reported.
+pub struct TimeHover(pub Option<f64>);
+
+fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
+    Plot::new(id.to_string())
+        .height(height)
+        .legend(Legend::default())
+        .link_axis(time_group(), [true, false])
+        .link_cursor(time_group(), [true, false])
+        .x_axis_label("time (s)")
+        .y_axis_label(y_label.to_string())
+}
+
+/// Total gyro bias (constant + segment), three axes, as steps over time.
+pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32) -> TimeHover {
+    let t0 = ride.t0;
+    let r = time_plot("bias", height, "bias (deg/s)").show(ui, |plot| {
+        for (a, name) in ["x (roll)", "y (pitch)", "z (yaw)"].iter().enumerate() {
+            let pts: Vec<[f64; 2]> = snap
+                .segments
+                .iter()
+                .flat_map(|s| [[s.t0 - t0, s.bias_dps[a]], [s.t1 - t0, s.bias_dps[a]]])
+                .collect();
+            plot.line(Line::new(format!("bias {name}"), pts).color(AXES[a]));
+        }
+        hovered_time(plot, t0)
+    });
+    TimeHover(r.inner)
+}
+
+/// Residuals at the GPS fixes: along-track, cross-track, vertical.
+pub fn residuals_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32) -> TimeHover {
+    let t0 = ride.t0;
+    let r = time_plot("residuals", height, "fix - path (m)").show(ui, |plot| {
+        let res = &snap.residuals;
+        let along: PlotPoints = res.iter().map(|r| [r.t - t0, r.along]).collect();
+        let cross: PlotPoints = res.iter().map(|r| [r.t - t0, r.cross]).collect();
+        plot.line(Line::new("along-track", along).color(AXES[0]));
+        plot.line(Line::new("cross-track", cross).color(AXES[1]));
+        if res.iter().any(|r| r.up.is_some()) {
+            let up: PlotPoints = res
+                .iter()
+                .filter_map(|r| r.up.map(|u| [r.t - t0, u]))
+                .collect();
+            plot.line(Line::new("vertical", up).color(AXES[2]));
+        }
+        for &(a, b) in &ride.outages {
+            plot.vline(VLine::new("GPS outage", a - t0).color(OUTAGE));
+            plot.vline(VLine::new("GPS outage", b - t0).color(OUTAGE));
+        }
+        hovered_time(plot, t0)
+    });
+    TimeHover(r.inner)
+}
+
+fn hovered_time(plot: &egui_plot::PlotUi<'_>, t0: f64) -> Option<f64> {
+    if plot.response().hovered() {
+        plot.pointer_coordinate().map(|p| p.x + t0)
+    } else {
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_finds_the_closest_sorted_entry() {
+        let ts = [0.0, 1.0, 2.0, 10.0];
+        let f = |i: usize| ts[i];
+        assert_eq!(nearest(f, 4, -5.0), Some(0));
+        assert_eq!(nearest(f, 4, 1.4), Some(1));
+        assert_eq!(nearest(f, 4, 1.6), Some(2));
+        assert_eq!(nearest(f, 4, 7.0), Some(3));
+        assert_eq!(nearest(f, 4, 99.0), Some(3));
+        assert_eq!(nearest(f, 0, 1.0), None);
+    }
+
+    #[test]
+    fn runs_split_by_key_and_join_up() {
+        let pts: Vec<[f64; 3]> = (0..6).map(|i| [i as f64, i as f64, 0.0]).collect();
+        let r = runs(&pts, |i| i >= 3);
+        assert_eq!(r.len(), 2);
+        assert_eq!(r[0].1.len(), 3);
+        // The second run starts at the first run's last point.
+        assert_eq!(r[1].1[0], [2.0, 0.0]);
+        assert_eq!(r[1].1.len(), 4);
+    }
+}

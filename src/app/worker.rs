@@ -1,0 +1,441 @@
+//! The worker thread: owns the ride and the [`Reconstruction`], runs it one
+//! iteration at a time and sends the UI what it needs to draw.
+//!
+//! The UI never blocks on it: requests go in over one channel, updates come
+//! back over another, and the worker wakes the UI with `request_repaint` after
+//! each send. Requests are read between iterations, so Pause, new settings and
+//! shutdown act within one iteration (tens of milliseconds on a 30-minute ride).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
+use std::time::{Duration, Instant};
+
+use crate::diagnosis::{FixResidual, ResidualRms, SegmentBias, fix_residuals, segment_biases};
+use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
+use crate::loading;
+use crate::model::Model;
+use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
+use crate::signals::Signals;
+
+/// At most this many path points go to the UI per snapshot.
+pub const MAX_PATH_POINTS: usize = 4000;
+/// Snapshots are sent at most this often while running (the last of a run always is).
+const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(50);
+
+/// Where a ride comes from.
+#[derive(Clone, Debug)]
+pub enum RideSource {
+    Path(PathBuf),
+    /// In-memory bytes (the bundled sample, a dropped file without a path).
+    Bytes {
+        name: String,
+        bytes: Arc<[u8]>,
+    },
+}
+
+impl RideSource {
+    pub fn name(&self) -> String {
+        match self {
+            Self::Path(p) => p.display().to_string(),
+            Self::Bytes { name, .. } => name.clone(),
+        }
+    }
+}
+
+/// What the worker can export.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExportKind {
+    PathCsv,
+    PathGpx,
+    ReportJson,
+}
+
+/// UI -> worker.
+#[derive(Debug)]
+pub enum Request {
+    Load(RideSource),
+    Run,
+    Pause,
+    Step,
+    /// Start the fit again from the start guess with the current settings.
+    Reset,
+    Settings(FitSettings),
+    Export(ExportKind, PathBuf),
+    Shutdown,
+}
+
+/// A freshly loaded ride: the measurements to draw under the fit.
+#[derive(Clone, Debug)]
+pub struct RideView {
+    pub source: RideSource,
+    pub rows: usize,
+    pub duration_s: f64,
+    pub t0: f64,
+    /// GPS fixes: log time, east, north (m).
+    pub fixes: Vec<[f64; 3]>,
+    /// GPS outages (log time from, to): gaps between fixes longer than 2.5 s.
+    pub outages: Vec<(f64, f64)>,
+    /// Extra channels of the log (for the effect catalogue).
+    pub channels: Vec<String>,
+    pub warnings: Vec<String>,
+}
+
+/// The state of the fit after an iteration, decimated for drawing.
+#[derive(Clone, Debug)]
+pub struct Snapshot {
+    pub phase: Phase,
+    pub history: Vec<IterationReport>,
+    pub stats: FitStats,
+    /// Path points: log time, east, north (m), at most [`MAX_PATH_POINTS`].
+    pub path: Vec<[f64; 3]>,
+    pub residuals: Vec<FixResidual>,
+    pub residual_rms: ResidualRms,
+    pub segments: Vec<SegmentBias>,
+    /// Global parameters: effect id, name, value, unit (segment biases are in `segments`).
+    pub params: Vec<(String, String, f64, String)>,
+    pub n_params: usize,
+    pub effects: Vec<String>,
+}
+
+/// Worker -> UI.
+#[derive(Debug)]
+pub enum Update {
+    Loading(String),
+    Loaded(Box<RideView>),
+    /// The ride could not be loaded; the previous one (if any) stays.
+    LoadFailed(String),
+    Snapshot(Box<Snapshot>),
+    Running(bool),
+    /// A setting was refused or an export failed.
+    Error(String),
+    Exported(String),
+}
+
+/// The UI's handle on the worker.
+pub struct WorkerHandle {
+    tx: Sender<Request>,
+    pub rx: Receiver<Update>,
+}
+
+impl WorkerHandle {
+    /// Start the worker; `wake` is called after every update it sends (the UI's
+    /// `request_repaint`).
+    pub fn spawn(settings: FitSettings, wake: impl Fn() + Send + 'static) -> Self {
+        let (tx, worker_rx) = std::sync::mpsc::channel();
+        let (worker_tx, rx) = std::sync::mpsc::channel();
+        let spawned = std::thread::Builder::new()
+            .name("gyropath-worker".into())
+            .spawn(move || {
+                Worker {
+                    settings,
+                    ride: None,
+                    running: false,
+                    tx: worker_tx,
+                    wake: Box::new(wake),
+                }
+                .run(worker_rx)
+            });
+        if let Err(e) = spawned {
+            // Without a worker nothing can be fitted; say so in the window.
+            let (etx, erx) = std::sync::mpsc::channel();
+            let _ = etx.send(Update::Error(format!(
+                "cannot start the worker thread: {e}"
+            )));
+            return Self { tx, rx: erx };
+        }
+        Self { tx, rx }
+    }
+
+    /// Send a request; a worker that has gone away is ignored (the UI shows the last state).
+    pub fn send(&self, request: Request) {
+        let _ = self.tx.send(request);
+    }
+}
+
+impl Drop for WorkerHandle {
+    fn drop(&mut self) {
+        self.send(Request::Shutdown);
+    }
+}
+
+struct LoadedRide {
+    source: RideSource,
+    signals: Arc<Signals>,
+    fit: Option<Reconstruction>,
+}
+
+struct Worker {
+    settings: FitSettings,
+    ride: Option<LoadedRide>,
+    running: bool,
+    tx: Sender<Update>,
+    wake: Box<dyn Fn() + Send>,
+}
+
+impl Worker {
+    fn send(&self, update: Update) {
+        let _ = self.tx.send(update);
+        (self.wake)();
+    }
+
+    fn run(mut self, rx: Receiver<Request>) {
+        let mut last_snapshot = Instant::now() - SNAPSHOT_INTERVAL;
+        loop {
+            let busy = self.running && self.fit().is_some_and(|f| !f.is_done());
+            let request = if busy {
+                match rx.try_recv() {
+                    Ok(r) => Some(r),
+                    Err(TryRecvError::Empty) => None,
+                    Err(TryRecvError::Disconnected) => return,
+                }
+            } else {
+                match rx.recv_timeout(Duration::from_secs(3600)) {
+                    Ok(r) => Some(r),
+                    Err(RecvTimeoutError::Timeout) => continue,
+                    Err(RecvTimeoutError::Disconnected) => return,
+                }
+            };
+            if let Some(request) = request {
+                if matches!(request, Request::Shutdown) {
+                    return;
+                }
+                self.handle(request);
+                continue;
+            }
+            // One iteration of the running fit.
+            let done = match self.fit_mut() {
+                Some(fit) => {
+                    fit.iterate();
+                    fit.is_done()
+                }
+                None => true,
+            };
+            if done || last_snapshot.elapsed() >= SNAPSHOT_INTERVAL {
+                self.send_snapshot();
+                last_snapshot = Instant::now();
+            }
+            if done {
+                self.running = false;
+                self.send(Update::Running(false));
+            }
+        }
+    }
+
+    fn fit(&self) -> Option<&Reconstruction> {
+        self.ride.as_ref().and_then(|r| r.fit.as_ref())
+    }
+
+    fn fit_mut(&mut self) -> Option<&mut Reconstruction> {
+        self.ride.as_mut().and_then(|r| r.fit.as_mut())
+    }
+
+    fn handle(&mut self, request: Request) {
+        match request {
+            Request::Load(source) => self.load(source),
+            Request::Run => {
+                self.running = self.fit().is_some();
+                self.send(Update::Running(self.running));
+            }
+            Request::Pause => {
+                self.running = false;
+                self.send(Update::Running(false));
+            }
+            Request::Step => {
+                self.running = false;
+                if let Some(fit) = self.fit_mut() {
+                    fit.iterate();
+                    self.send_snapshot();
+                }
+                self.send(Update::Running(false));
+            }
+            Request::Reset => {
+                self.running = false;
+                self.restart_fit();
+                self.send(Update::Running(false));
+            }
+            Request::Settings(settings) => self.apply_settings(settings),
+            Request::Export(kind, path) => self.export(kind, &path),
+            Request::Shutdown => {}
+        }
+    }
+
+    fn load(&mut self, source: RideSource) {
+        self.send(Update::Loading(source.name()));
+        let parsed = match &source {
+            RideSource::Path(p) => loading::load_file(p),
+            RideSource::Bytes { name, bytes } => loading::parse(bytes, name),
+        };
+        let signals = match parsed
+            .map_err(|e| e.to_string())
+            .and_then(|log| Signals::from_log(&log).map_err(|e| e.to_string()))
+        {
+            Ok(s) => Arc::new(s),
+            Err(e) => {
+                self.send(Update::LoadFailed(e));
+                return;
+            }
+        };
+        self.running = false;
+        self.send(Update::Loaded(Box::new(ride_view(&source, &signals))));
+        self.ride = Some(LoadedRide {
+            source,
+            signals,
+            fit: None,
+        });
+        self.restart_fit();
+        self.send(Update::Running(false));
+    }
+
+    /// A new fit of the loaded ride from its start guess.
+    fn restart_fit(&mut self) {
+        let Some(ride) = self.ride.as_mut() else {
+            return;
+        };
+        match Reconstruction::new(ride.signals.clone(), self.settings.clone()) {
+            Ok(fit) => {
+                ride.fit = Some(fit);
+                self.send_snapshot();
+            }
+            Err(e) => {
+                ride.fit = None;
+                self.send(Update::Error(e.to_string()));
+            }
+        }
+    }
+
+    fn apply_settings(&mut self, settings: FitSettings) {
+        let previous = std::mem::replace(&mut self.settings, settings.clone());
+        let Some(ride) = self.ride.as_mut() else {
+            return;
+        };
+        let result = match ride.fit.as_mut() {
+            Some(fit) => fit.apply_settings(settings).map_err(|e| e.to_string()),
+            // The last settings could not be fitted: try again from the start.
+            None => Reconstruction::new(ride.signals.clone(), settings)
+                .map(|fit| ride.fit = Some(fit))
+                .map_err(|e| e.to_string()),
+        };
+        match result {
+            Ok(()) => self.send_snapshot(),
+            Err(e) => {
+                if ride.fit.is_some() {
+                    self.settings = previous;
+                }
+                self.send(Update::Error(e));
+            }
+        }
+    }
+
+    fn send_snapshot(&self) {
+        if let Some(fit) = self.fit() {
+            self.send(Update::Snapshot(Box::new(snapshot(fit))));
+        }
+    }
+
+    fn export(&self, kind: ExportKind, path: &std::path::Path) {
+        let (Some(ride), Some(fit)) = (self.ride.as_ref(), self.fit()) else {
+            self.send(Update::Error("nothing to export: no ride is fitted".into()));
+            return;
+        };
+        let protect = match &ride.source {
+            RideSource::Path(p) => Some(p.as_path()),
+            RideSource::Bytes { .. } => None,
+        };
+        let model = fit.model();
+        let result = match kind {
+            ExportKind::PathCsv | ExportKind::PathGpx => {
+                let traj = fit.trajectory();
+                write_atomically(path, protect, |w| match kind {
+                    ExportKind::PathGpx => write_path_gpx(w, model, &traj),
+                    _ => write_path_csv(w, model, &traj),
+                })
+            }
+            ExportKind::ReportJson => {
+                let report = FitReport::new(fit, 0.0);
+                write_atomically(path, protect, |w| {
+                    serde_json::to_writer_pretty(&mut *w, &report)
+                        .map_err(std::io::Error::other)?;
+                    writeln!(w)
+                })
+            }
+        };
+        match result {
+            Ok(()) => self.send(Update::Exported(path.display().to_string())),
+            Err(e) => self.send(Update::Error(e.to_string())),
+        }
+    }
+}
+
+fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
+    let fixes: Vec<[f64; 3]> = sig.fixes.iter().map(|f| [f.t, f.en[0], f.en[1]]).collect();
+    let mut outages = Vec::new();
+    let t_first = sig.t[0];
+    let t_last = sig.t[sig.len() - 1];
+    let mut prev = t_first;
+    for f in sig.fixes.iter().map(|f| f.t).chain(std::iter::once(t_last)) {
+        if f - prev > 2.5 {
+            outages.push((prev, f));
+        }
+        prev = f;
+    }
+    RideView {
+        source: source.clone(),
+        rows: sig.len(),
+        duration_s: sig.duration(),
+        t0: t_first,
+        fixes,
+        outages,
+        channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
+        warnings: sig.warnings.clone(),
+    }
+}
+
+/// Decimate the path to at most [`MAX_PATH_POINTS`] (always keeping the last row).
+fn decimated_path(model: &Model, p: &[nalgebra::Vector3<f64>]) -> Vec<[f64; 3]> {
+    let t = &model.signals.t;
+    let stride = p.len().div_ceil(MAX_PATH_POINTS).max(1);
+    let mut out: Vec<[f64; 3]> = (0..p.len())
+        .step_by(stride)
+        .map(|j| [t[j], p[j].x, p[j].y])
+        .collect();
+    if !(p.len() - 1).is_multiple_of(stride) {
+        let j = p.len() - 1;
+        out.push([t[j], p[j].x, p[j].y]);
+    }
+    out
+}
+
+/// Everything the UI draws about the current state of `fit`.
+pub fn snapshot(fit: &Reconstruction) -> Snapshot {
+    let model = fit.model();
+    let theta = fit.params();
+    let traj = fit.trajectory();
+    let residuals = fix_residuals(model, theta, &traj);
+    let mut params = Vec::new();
+    for (e, effect) in model.effects().iter().enumerate() {
+        if effect.segment_edges().is_some() {
+            continue;
+        }
+        for (info, &v) in effect.params().iter().zip(&theta[model.range(e)]) {
+            params.push((
+                effect.id(),
+                info.name.clone(),
+                v * info.scale,
+                info.unit.to_string(),
+            ));
+        }
+    }
+    Snapshot {
+        phase: fit.phase(),
+        history: fit.history().to_vec(),
+        stats: fit.stats(),
+        path: decimated_path(model, &traj.p),
+        residual_rms: ResidualRms::of(&residuals),
+        residuals,
+        segments: segment_biases(model, theta),
+        params,
+        n_params: model.n_params(),
+        effects: model.effect_ids(),
+    }
+}

@@ -1,0 +1,59 @@
+//! Seeing where the model fails: residuals in the frame of travel, the fitted
+//! bias per segment, and (with the effect catalogue) held-out validation and
+//! the ranking of missing effects.
+
+pub mod residuals;
+
+pub use residuals::{FixResidual, ResidualRms, fix_residuals, rms_per_minute};
+
+use crate::effects::DEG_PER_RAD;
+use crate::model::Model;
+
+/// The total gyro bias (constant plus segment, deg/s) over one stretch of the ride.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SegmentBias {
+    /// Start and end of the stretch (log time, s).
+    pub t0: f64,
+    pub t1: f64,
+    pub bias_dps: [f64; 3],
+}
+
+/// The bias the model subtracts from the gyro, per segment: `b + b_s` of the
+/// paper's model. Without segments it is one stretch over the whole ride.
+pub fn segment_biases(model: &Model, theta: &[f64]) -> Vec<SegmentBias> {
+    let constant = model
+        .effect_index("gyro_bias")
+        .map(|e| {
+            let p = &theta[model.range(e)];
+            [p[0], p[1], p[2]]
+        })
+        .unwrap_or([0.0; 3]);
+    let total = |extra: &[f64]| {
+        [0, 1, 2].map(|a| (constant[a] + extra.get(a).copied().unwrap_or(0.0)) * DEG_PER_RAD)
+    };
+    let segments = model
+        .effect_index("gyro_bias_segments")
+        .and_then(|e| Some((e, model.effects()[e].segment_edges()?)));
+    match segments {
+        Some((e, edges)) => {
+            let p = &theta[model.range(e)];
+            edges
+                .windows(2)
+                .enumerate()
+                .map(|(s, w)| SegmentBias {
+                    t0: w[0],
+                    t1: w[1],
+                    bias_dps: total(&p[3 * s..3 * s + 3]),
+                })
+                .collect()
+        }
+        None => {
+            let t = &model.signals.t;
+            vec![SegmentBias {
+                t0: t[0],
+                t1: t[t.len() - 1],
+                bias_dps: total(&[]),
+            }]
+        }
+    }
+}

@@ -1,0 +1,179 @@
+//! Residuals at the GPS rows, in the frame of the vehicle's travel.
+//!
+//! A residual is measurement minus model, `r = z - p` (m). Horizontally it is
+//! split along the model's direction of travel `h` (the forward axis rotated
+//! by `q_t`, projected on the ground and normalised) and across it:
+//!
+//! ```text
+//! along = r . h          (+: the fix is ahead of the path)
+//! cross = r . (up x h)   (+: the fix is to the left of the path)
+//! ```
+//!
+//! A GPS latency shows up in `along` (proportional to speed), a heading or
+//! scale-factor error in `cross` (growing through turns), a barometer drift in
+//! the vertical residual.
+
+use nalgebra::Vector3;
+
+use crate::model::rotation::forward;
+use crate::model::{Model, Trajectory};
+
+/// The residual of one GPS fix.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FixResidual {
+    /// Log time (s).
+    pub t: f64,
+    pub row: usize,
+    /// East and north components (m), fix minus path.
+    pub east: f64,
+    pub north: f64,
+    pub along: f64,
+    pub cross: f64,
+    /// Vertical reference minus path up (m): barometer plus offset if the log has
+    /// one, else GPS altitude; `None` if the fix has neither.
+    pub up: Option<f64>,
+    /// Model speed at the fix (m/s), for relating residuals to motion.
+    pub speed: f64,
+}
+
+impl FixResidual {
+    pub fn horizontal(&self) -> f64 {
+        self.east.hypot(self.north)
+    }
+}
+
+/// Residuals of every GPS fix for parameters `theta` and their path `traj`
+/// (pass `model.trajectory(theta)`; it is taken to avoid a second sweep when the
+/// caller has it already).
+pub fn fix_residuals(model: &Model, theta: &[f64], traj: &Trajectory) -> Vec<FixResidual> {
+    let sig = &model.signals;
+    let baro = model.baro_offset(theta);
+    let has_baro_model = model.has_baro_offset();
+    sig.fixes
+        .iter()
+        .map(|fix| {
+            let p = traj.p[fix.row];
+            let e = fix.en[0] - p.x;
+            let n = fix.en[1] - p.y;
+            let f = forward(&traj.q[fix.row]);
+            let h = Vector3::new(f.x, f.y, 0.0);
+            let h = if h.norm() > 1e-9 {
+                h.normalize()
+            } else {
+                Vector3::x()
+            };
+            let along = e * h.x + n * h.y;
+            let cross = -e * h.y + n * h.x;
+            let up = match (fix.baro, has_baro_model) {
+                (Some(b), true) => Some(b + baro - p.z),
+                _ => fix.up.map(|u| u - p.z),
+            };
+            let dt = sig.dt[fix.row.max(1)];
+            let speed = if dt > 0.0 {
+                traj.d[fix.row.max(1)] / dt
+            } else {
+                0.0
+            };
+            FixResidual {
+                t: fix.t,
+                row: fix.row,
+                east: e,
+                north: n,
+                along,
+                cross,
+                up,
+                speed,
+            }
+        })
+        .collect()
+}
+
+/// RMS of along-track, cross-track and vertical residuals.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct ResidualRms {
+    pub along_m: f64,
+    pub cross_m: f64,
+    pub up_m: Option<f64>,
+    pub fixes: usize,
+}
+
+impl ResidualRms {
+    pub fn of(res: &[FixResidual]) -> Self {
+        let n = res.len();
+        if n == 0 {
+            return Self::default();
+        }
+        let ms = |f: &dyn Fn(&FixResidual) -> f64| res.iter().map(|r| f(r).powi(2)).sum::<f64>();
+        let ups: Vec<f64> = res.iter().filter_map(|r| r.up).collect();
+        Self {
+            along_m: (ms(&|r| r.along) / n as f64).sqrt(),
+            cross_m: (ms(&|r| r.cross) / n as f64).sqrt(),
+            up_m: (!ups.is_empty())
+                .then(|| (ups.iter().map(|u| u * u).sum::<f64>() / ups.len() as f64).sqrt()),
+            fixes: n,
+        }
+    }
+}
+
+/// RMS per minute of ride: `(start of the minute in log time, rms)`.
+pub fn rms_per_minute(res: &[FixResidual]) -> Vec<(f64, ResidualRms)> {
+    let Some(first) = res.first() else {
+        return Vec::new();
+    };
+    let t0 = first.t;
+    let mut out = Vec::new();
+    let mut start = 0;
+    while start < res.len() {
+        let minute = ((res[start].t - t0) / 60.0).floor();
+        let end = res[start..]
+            .iter()
+            .position(|r| ((r.t - t0) / 60.0).floor() != minute)
+            .map_or(res.len(), |k| start + k);
+        out.push((t0 + 60.0 * minute, ResidualRms::of(&res[start..end])));
+        start = end;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelSpec;
+    use crate::optimisation::{FitSettings, Reconstruction};
+    use std::sync::Arc;
+
+    #[test]
+    fn along_and_cross_split_the_horizontal_residual() {
+        let sig = Arc::new(crate::testing::winding_signals(300.0, 100.0));
+        let model = Model::new(sig, ModelSpec::default()).expect("model");
+        let theta = model.initial_params();
+        let traj = model.trajectory(&theta);
+        let res = fix_residuals(&model, &theta, &traj);
+        assert_eq!(res.len(), model.signals.fixes.len());
+        for r in &res {
+            let h2 = r.east.powi(2) + r.north.powi(2);
+            assert!((r.along.powi(2) + r.cross.powi(2) - h2).abs() < 1e-9 * (1.0 + h2));
+        }
+    }
+
+    #[test]
+    fn a_fit_leaves_small_residuals_with_no_along_track_bias() {
+        let sig = Arc::new(crate::testing::simulated_signals(2, 300.0, &[]));
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+        fit.run(&mut |_: &Reconstruction, _: &crate::optimisation::IterationReport| {});
+        let res = fix_residuals(fit.model(), fit.params(), &fit.trajectory());
+        let rms = ResidualRms::of(&res);
+        assert!(rms.along_m < 4.0 && rms.cross_m < 4.0, "{rms:?}");
+        let mean_along = res.iter().map(|r| r.along).sum::<f64>() / res.len() as f64;
+        assert!(
+            mean_along.abs() < 0.5,
+            "mean along-track residual {mean_along}"
+        );
+        let minutes = rms_per_minute(&res);
+        assert!((5..=6).contains(&minutes.len()), "{} minutes", minutes.len());
+        assert_eq!(
+            minutes.iter().map(|(_, r)| r.fixes).sum::<usize>(),
+            res.len()
+        );
+    }
+}

@@ -1,0 +1,155 @@
+//! The app driven through its real UI with egui_kittest (no display needed).
+
+use std::time::{Duration, Instant};
+
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use gyropath::app::{AppSettings, GyropathApp, sample_ride};
+
+fn harness(app: GyropathApp) -> Harness<'static, GyropathApp> {
+    Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .build_ui_state(|ui, app: &mut GyropathApp| app.ui(ui), app)
+}
+
+/// Step the UI until `done` holds or `timeout` passes (the worker runs on its own thread).
+fn step_until(
+    h: &mut Harness<'static, GyropathApp>,
+    timeout: Duration,
+    mut done: impl FnMut(&GyropathApp) -> bool,
+) -> bool {
+    let start = Instant::now();
+    while start.elapsed() < timeout {
+        h.step();
+        if done(h.state()) {
+            h.step();
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    false
+}
+
+fn manual_settings() -> AppSettings {
+    AppSettings {
+        auto_run: false,
+        ..AppSettings::default()
+    }
+}
+
+/// The cost shown in the fit panel (the label after "cost").
+fn shown_cost(h: &Harness<'static, GyropathApp>) -> f64 {
+    let s = h.state().snapshot.as_ref().expect("snapshot");
+    let text = format!("{:.6e}", s.stats.cost);
+    // The label exists in the UI with exactly this text.
+    h.get_by_label(&text);
+    text.parse().expect("number")
+}
+
+#[test]
+fn run_fits_the_sample_and_the_cost_label_falls() {
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .snapshot
+        .is_some()));
+    let first = shown_cost(&h);
+    h.get_by_label("Run").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| !a.history.is_empty()),
+        "the fit did not finish"
+    );
+    let last = shown_cost(&h);
+    assert!(last < 0.2 * first, "cost {first} -> {last}");
+    let rms = h
+        .state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .stats
+        .rms_horizontal_m;
+    assert!(rms < 3.0, "GPS RMS {rms}");
+    // The model history has one row with the fit RMS in it.
+    h.get_by_label(&format!("{rms:.3}"));
+}
+
+#[test]
+fn segment_length_changes_the_segment_count_live() {
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .snapshot
+        .is_some()));
+    let before = h
+        .state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .segments
+        .len();
+    h.get_by_label(&format!("{before}"));
+    // Step once, then lengthen the segments through the settings as the slider would.
+    h.get_by_label("Step once").click();
+    h.state_mut().settings.fit.model.segment_s = 20.0;
+    h.state_mut().apply(gyropath::app::Command::SettingsChanged);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| {
+        a.snapshot
+            .as_ref()
+            .is_some_and(|s| s.segments.len() != before)
+    }));
+    let after = h
+        .state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .segments
+        .len();
+    assert_eq!(
+        after,
+        before.div_ceil(4),
+        "{before} segments of 5 s -> {after} of 20 s"
+    );
+    h.get_by_label(&format!("{after}"));
+}
+
+#[test]
+fn a_bad_file_shows_its_error_and_keeps_the_ride() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let bad = dir.path().join("bad.csv");
+    // The sample's first rows with a number spoiled on line 40 (column gz_dps).
+    let sample = std::str::from_utf8(gyropath::app::SAMPLE_RIDE).expect("utf8");
+    let mut lines: Vec<String> = sample.lines().take(60).map(str::to_string).collect();
+    let header = lines
+        .iter()
+        .position(|l| !l.starts_with('#'))
+        .expect("header");
+    let col = lines[header]
+        .split(',')
+        .position(|c| c == "gz_dps")
+        .expect("gz_dps column");
+    let mut fields: Vec<&str> = lines[39].split(',').collect();
+    fields[col] = "1.2.3";
+    lines[39] = fields.join(",");
+    std::fs::write(&bad, lines.join("\n")).expect("write");
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::Path(bad),
+    ));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .error
+        .is_some()));
+    let error = h.state().error.clone().expect("error");
+    assert!(error.contains("bad.csv:40"), "{error}");
+    assert!(error.contains("gz_dps"), "{error}");
+    h.get_by_label_contains("bad.csv");
+    // The sample ride is still loaded.
+    let ride = h.state().ride.as_ref().expect("ride");
+    assert!(ride.source.name().contains("sample"));
+    h.get_by_label("Dismiss").click();
+    h.run_steps(2);
+    assert!(h.state().error.is_none());
+}
