@@ -15,7 +15,6 @@
 
 use nalgebra::Vector3;
 
-use crate::model::rotation::forward;
 use crate::model::{Model, Trajectory};
 
 /// The residual of one GPS fix.
@@ -47,45 +46,49 @@ impl FixResidual {
 /// caller has it already).
 pub fn fix_residuals(model: &Model, theta: &[f64], traj: &Trajectory) -> Vec<FixResidual> {
     let sig = &model.signals;
-    let baro = model.baro_offset(theta);
-    let has_baro_model = model.has_baro_offset();
-    sig.fixes
-        .iter()
-        .map(|fix| {
-            let p = traj.p[fix.row];
-            let e = fix.en[0] - p.x;
-            let n = fix.en[1] - p.y;
-            let f = forward(&traj.q[fix.row]);
-            let h = Vector3::new(f.x, f.y, 0.0);
-            let h = if h.norm() > 1e-9 {
-                h.normalize()
-            } else {
-                Vector3::x()
-            };
-            let along = e * h.x + n * h.y;
-            let cross = -e * h.y + n * h.x;
-            let up = match (fix.baro, has_baro_model) {
-                (Some(b), true) => Some(b + baro - p.z),
-                _ => fix.up.map(|u| u - p.z),
-            };
-            let dt = sig.dt[fix.row.max(1)];
-            let speed = if dt > 0.0 {
-                traj.d[fix.row.max(1)] / dt
-            } else {
-                0.0
-            };
-            FixResidual {
-                t: fix.t,
-                row: fix.row,
-                east: e,
-                north: n,
-                along,
-                cross,
-                up,
-                speed,
+    let misfit = model.misfits(theta, traj);
+    let (axis, _) = model.forward_axis(theta);
+    let obs = &model.observations;
+    let mut out = Vec::with_capacity(sig.fixes.len());
+    let mut k = 0;
+    for fix in &sig.fixes {
+        // The observations of this fix (they are stored fix by fix).
+        let (mut en, mut up_gps, mut up_baro) = ([0.0; 2], None, None);
+        while k < obs.len() && obs[k].row == fix.row {
+            let o = &obs[k];
+            match (o.axis, o.baro) {
+                (2, true) => up_baro = Some(-misfit[k]),
+                (2, false) => up_gps = Some(-misfit[k]),
+                (a, _) => en[a] = -misfit[k],
             }
-        })
-        .collect()
+            k += 1;
+        }
+        let f = traj.q[fix.row] * axis;
+        let h = Vector3::new(f.x, f.y, 0.0);
+        let h = if h.norm() > 1e-9 {
+            h.normalize()
+        } else {
+            Vector3::x()
+        };
+        let [e, n] = en;
+        let j = fix.row.max(1);
+        let speed = if sig.dt[j] > 0.0 {
+            traj.d[j] / sig.dt[j]
+        } else {
+            0.0
+        };
+        out.push(FixResidual {
+            t: fix.t,
+            row: fix.row,
+            east: e,
+            north: n,
+            along: e * h.x + n * h.y,
+            cross: -e * h.y + n * h.x,
+            up: up_baro.or(up_gps),
+            speed,
+        });
+    }
+    out
 }
 
 /// RMS of along-track, cross-track and vertical residuals.
@@ -170,7 +173,11 @@ mod tests {
             "mean along-track residual {mean_along}"
         );
         let minutes = rms_per_minute(&res);
-        assert!((5..=6).contains(&minutes.len()), "{} minutes", minutes.len());
+        assert!(
+            (5..=6).contains(&minutes.len()),
+            "{} minutes",
+            minutes.len()
+        );
         assert_eq!(
             minutes.iter().map(|(_, r)| r.fixes).sum::<usize>(),
             res.len()

@@ -4,7 +4,7 @@
 //! `(p_up - baro - c) / sigma_baro`, so `d r / d c = -1 / sigma_baro`. Added
 //! automatically whenever the log has a `baro_alt_m` column.
 
-use super::{Effect, ParamInfo};
+use super::{Columns, Effect, ParamInfo, TargetSite};
 use crate::model::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
@@ -23,7 +23,15 @@ impl Effect for BaroOffset {
         vec![guess.baro_offset]
     }
 
-    fn baro_offset(&self, p: &[f64]) -> Option<f64> {
-        Some(p[0])
+    fn observes_baro(&self) -> bool {
+        true
+    }
+
+    fn target_shift(&self, p: &[f64], site: &TargetSite) -> Option<(f64, Columns<f64>)> {
+        site.baro.then(|| {
+            let mut cols = Columns::default();
+            cols.push(0, 1.0);
+            (p[0], cols)
+        })
     }
 }

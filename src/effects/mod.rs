@@ -5,10 +5,13 @@
 //!
 //! | site | what the effect maps | used by |
 //! | --- | --- | --- |
-//! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments` |
+//! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments`, `gyro_bias_channel:<c>`, `gyro_scale` |
 //! | distance | odometer distance `d_j` of step `j` -> corrected distance | `odometer_gain` |
+//! | forward axis | the vehicle's forward axis in sensor axes, `dir_t = q_t f` | `mount_misalignment` |
 //! | start | initial orientation and position | `initial_orientation`, `initial_position` |
-//! | observation | what a GPS row is compared with | `baro_offset` |
+//! | observation time | the instant a fix refers to (`t - lag`, path interpolated) | `gps_lag` |
+//! | observation target | what a row is compared with (shift of the target) | `baro_offset`, `baro_drift` |
+//! | loss | robust loss on the GPS rows | `gps_outliers` |
 //! | prior | extra residuals on the parameters | `gyro_bias_segments` (random walk) |
 //!
 //! An effect implements only the sites it uses; the model chains the effects
@@ -134,6 +137,18 @@ pub struct PriorRows {
     pub entries: Vec<(usize, usize, f64)>,
 }
 
+/// What a target shift may depend on.
+#[derive(Clone, Copy, Debug)]
+pub struct TargetSite {
+    /// Time of the fix (log time, s) and of the start of the ride.
+    pub t: f64,
+    pub t_start: f64,
+    /// Component: 0 east, 1 north, 2 up.
+    pub axis: usize,
+    /// A barometric row.
+    pub baro: bool,
+}
+
 /// One physical effect. Default methods mean "does not act at this site".
 pub trait Effect: Send + Sync + std::fmt::Debug {
     /// Fixed id used on the command line, in reports and in the app.
@@ -227,8 +242,26 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn initial_position(&self, _p: &[f64]) -> Option<Vector3<f64>> {
         None
     }
-    /// Offset (m) added to the barometric altitude to give local up.
-    fn baro_offset(&self, _p: &[f64]) -> Option<f64> {
+    /// Whether barometric rows are observed (the effect that fits the barometer's offset).
+    fn observes_baro(&self) -> bool {
+        false
+    }
+    /// Shift of an observation's target, `target' = target + s(p)`, and `d s / d p`.
+    fn target_shift(&self, _p: &[f64], _site: &TargetSite) -> Option<(f64, Columns<f64>)> {
+        None
+    }
+    /// The vehicle's forward axis in sensor axes, `f(p)`, and `d f / d p`
+    /// (`None`: the sensor's x axis).
+    fn forward_axis(&self, _p: &[f64]) -> Option<(Vector3<f64>, Columns<Vector3<f64>>)> {
+        None
+    }
+    /// GPS latency (s): the fix logged at `t` is the position at `t - lag`.
+    fn gps_lag(&self, _p: &[f64]) -> Option<f64> {
+        None
+    }
+    /// Scale of a Cauchy loss on the GPS rows, in units of the weighted
+    /// residual (`None`: least squares).
+    fn robust_scale(&self) -> Option<f64> {
         None
     }
 

@@ -10,7 +10,12 @@
 //! d C / d theta_j = J_j^T R_j^T B_j        J_j: right Jacobian of the increment
 //! d C / d d_j     = A_j . (R_j f)
 //! d C / d p_0 = A_0,   d C / d phi = J_l(phi)^T B_1
+//! d C / d m       = sum_j A_j . (R_j (d f / d m) d_j)   forward-axis parameters (dir_j = R_j f)
 //! ```
+//!
+//! An observation interpolated inside step `j` (GPS lag, see `observe`) puts
+//! `(1 - beta) g` on `p_j` and `beta g` on `p_{j-1}`; lag and target-shift
+//! parameters get their partials directly.
 //!
 //! Both sums are accumulated from the end of the ride backwards, so the whole
 //! gradient costs two passes instead of the naive O(N^2) chain rule. The
@@ -32,43 +37,57 @@ impl Model {
         let sig = &self.signals;
         let n = sig.len();
         let mut grad = vec![0.0; self.n_params()];
-        let baro = self.baro_offset(theta);
+        let plan = self.obs_plan(theta);
+        let (f, f_parts) = self.forward_axis(theta);
         let obs = &self.observations;
         let mut cost = 0.0;
         let mut k = obs.len();
         let mut a = Vector3::zeros();
         let mut b = Vector3::zeros();
+        // The share of observations interpolated inside step j + 1 that falls on p_j.
+        let mut pending = Vector3::zeros();
         // dC/d omega_j and dC/d d_j of the corrected signals, then back through the chains.
         let mut g_rate = vec![Vector3::zeros(); n];
         let mut g_dist = vec![0.0; n];
-        let mut baro_grad = 0.0;
 
-        // Add the residual gradient of every observation on `row` into `a`.
-        let mut take_row = |row: usize, a: &mut Vector3<f64>, k: &mut usize, cost: &mut f64| {
-            while *k > 0 && obs[*k - 1].row == row {
+        // Add the residual gradient of every observation evaluated in step `row`:
+        // x = p_row - beta Delta_row = (1 - beta) p_row + beta p_{row-1}.
+        let take_row = |row: usize,
+                        a: &mut Vector3<f64>,
+                        pending: &mut Vector3<f64>,
+                        k: &mut usize,
+                        cost: &mut f64,
+                        grad: &mut [f64]| {
+            *a += std::mem::take(pending);
+            let delta = path.p[row] - path.p[row.max(1) - 1];
+            while *k > 0 && plan.row[*k - 1] == row {
                 *k -= 1;
                 let o = &obs[*k];
-                let target = if o.baro { o.target + baro } else { o.target };
-                let r = o.w * (path.p[row][o.axis] - target);
-                *cost += r * r;
-                a[o.axis] += 2.0 * r * o.w;
-                if o.baro {
-                    baro_grad -= 2.0 * r * o.w;
-                }
+                let v = plan.value(*k, o, plan.x(*k, o.axis, &path.p[row], &delta));
+                *cost += v.r * v.r;
+                let g = 2.0 * v.r * v.slope;
+                let beta = plan.beta[*k];
+                a[o.axis] += g * (1.0 - beta);
+                pending[o.axis] += g * beta;
+                plan.for_extra(*k, o.axis, &delta, sig.dt[row], |i, d| grad[i] += g * d);
             }
         };
 
         for j in (1..n).rev() {
-            take_row(j, &mut a, &mut k, &mut cost);
+            take_row(j, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
             let rot = path.q[j].to_rotation_matrix();
-            let dir = super::rotation::forward(&path.q[j]);
+            let dir = rot * f;
             b += (dir * path.d[j]).cross(&a);
             // d C / d omega_j = dt_j J_j^T R_j^T B_j.
             let jr = self.spec.increment.right_jacobian(&path.theta[j]);
             g_rate[j] = jr.transpose() * (rot.transpose() * b) * sig.dt[j];
             g_dist[j] = a.dot(&dir);
+            // d Delta_j / d m = R_j (d f / d m) d_j for the forward-axis parameters.
+            for &(i, df) in &f_parts {
+                grad[i] += a.dot(&(rot * df)) * path.d[j];
+            }
         }
-        take_row(0, &mut a, &mut k, &mut cost);
+        take_row(0, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
         for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
             let r = self.range(e);
             self.effects[e].gyro_backward(
@@ -99,9 +118,6 @@ impl Model {
             for i in 0..3 {
                 grad[self.offsets[e] + i] += g[i];
             }
-        }
-        if let Some(e) = self.baro {
-            grad[self.offsets[e]] += baro_grad;
         }
         let prior = self.prior_rows(theta);
         for &(row, col, v) in &prior.entries {

@@ -39,6 +39,9 @@ pub(crate) struct PrefixSums {
     /// Free parameters that have acted so far, in the order they started.
     pub active: Vec<usize>,
     is_active: Vec<bool>,
+    /// Increments `v_{j,c}` of `D_c` made at the current step (distance-site
+    /// and forward-axis parameters), for observations interpolated inside it.
+    pub step_d: Vec<(usize, Vector3<f64>)>,
 }
 
 impl PrefixSums {
@@ -49,6 +52,7 @@ impl PrefixSums {
             d: vec![Vector3::zeros(); np],
             active: Vec::new(),
             is_active: vec![false; np],
+            step_d: Vec::new(),
         }
     }
 
@@ -65,17 +69,34 @@ impl PrefixSums {
     pub fn dp(&self, i: usize, p: &Vector3<f64>) -> Vector3<f64> {
         self.u[i].cross(p) - self.v[i] + self.d[i]
     }
+
+    /// `d x / d c` for a point `x = p_j - beta Delta_j` inside the current step `j`:
+    /// `U_c x x - V_c + D_c - beta v_{j,c}` (the rotation terms are linear in the point).
+    #[inline]
+    pub fn dp_at(&self, i: usize, x: &Vector3<f64>, beta: f64) -> Vector3<f64> {
+        let mut d = self.dp(i, x);
+        if beta != 0.0 {
+            for (c, v) in &self.step_d {
+                if *c == i {
+                    d -= v * beta;
+                }
+            }
+        }
+        d
+    }
 }
 
 impl Model {
     /// One forward sweep that keeps the prefix sums of the parameters where
-    /// `free` is true, calling `at_row(row, p_row, sums)` at every row that
-    /// holds an observation (after the row's own step is included).
+    /// `free` is true, calling `at_row(row, p_row, Delta_row, sums)` at every
+    /// row where an observation of `rows` (non-decreasing) is evaluated, after
+    /// the row's own step is included.
     pub(crate) fn prefix_sweep(
         &self,
         theta: &[f64],
         free: &[bool],
-        mut at_row: impl FnMut(usize, &Vector3<f64>, &PrefixSums),
+        rows: &[usize],
+        mut at_row: impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
     ) {
         let sig = &self.signals;
         let mut sums = PrefixSums::new(self.n_params());
@@ -100,17 +121,17 @@ impl Model {
                 }
             }
         }
-        let obs = &self.observations;
+        let (f, f_parts) = self.forward_axis(theta);
         let mut k = 0;
-        let mut visit = |row: usize, p: &Vector3<f64>, sums: &PrefixSums| {
-            if k < obs.len() && obs[k].row == row {
-                at_row(row, p, sums);
-                while k < obs.len() && obs[k].row == row {
+        let mut visit = |row: usize, p: &Vector3<f64>, delta: &Vector3<f64>, sums: &PrefixSums| {
+            if k < rows.len() && rows[k] == row {
+                at_row(row, p, delta, sums);
+                while k < rows.len() && rows[k] == row {
                     k += 1;
                 }
             }
         };
-        visit(0, &p0, &sums);
+        visit(0, &p0, &Vector3::zeros(), &sums);
         let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
         let mut dchain = vec![0.0; self.distance_chain.len() + 1];
         let mut q = q0;
@@ -124,7 +145,8 @@ impl Model {
             let th = chain[self.gyro_chain.len()] * sig.dt[j];
             q *= inc.quaternion(&th);
             let rot = q.to_rotation_matrix();
-            let dir = super::rotation::forward(&q);
+            let dir = rot * f;
+            sums.step_d.clear();
             // World rotation per unit change of the final rate, then back through the gyro chain.
             let mut down: Matrix3<f64> = rot.matrix() * inc.right_jacobian(&th) * sig.dt[j];
             for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
@@ -152,14 +174,25 @@ impl Model {
                 for &(c, dv) in part.params.as_slice() {
                     let idx = self.offsets[e] + c;
                     if free[idx] {
-                        sums.d[idx] += dir * (scale * dv);
+                        let inc = dir * (scale * dv);
+                        sums.d[idx] += inc;
+                        sums.step_d.push((idx, inc));
                         sums.activate(idx);
                     }
                 }
                 scale *= part.d_in;
             }
-            p += dir * d;
-            visit(j, &p, &sums);
+            for &(idx, df) in &f_parts {
+                if free[idx] {
+                    let inc = rot * (df * d);
+                    sums.d[idx] += inc;
+                    sums.step_d.push((idx, inc));
+                    sums.activate(idx);
+                }
+            }
+            let delta = dir * d;
+            p += delta;
+            visit(j, &p, &delta, &sums);
         }
     }
 
@@ -174,30 +207,25 @@ impl Model {
         let nr = self.n_residuals();
         let mut jac = DMatrix::<f64>::zeros(nr, columns.len());
         let mut res = DVector::<f64>::zeros(nr);
-        let baro_col = self
-            .baro
-            .map(|e| col_of[self.offsets[e]])
-            .filter(|&c| c != usize::MAX);
-        let baro = self.baro_offset(theta);
+        let plan = self.obs_plan(theta);
         let obs = &self.observations;
+        let sig = &self.signals;
         let mut k = 0;
-        let mut dp = vec![Vector3::zeros(); np];
-        self.prefix_sweep(theta, free, |row, p, sums| {
-            for &i in &sums.active {
-                dp[i] = sums.dp(i, p);
-            }
-            while k < obs.len() && obs[k].row == row {
+        self.prefix_sweep(theta, free, &plan.row, |row, p, delta, sums| {
+            while k < obs.len() && plan.row[k] == row {
                 let o = &obs[k];
-                let target = if o.baro { o.target + baro } else { o.target };
-                res[k] = o.w * (p[o.axis] - target);
+                let beta = plan.beta[k];
+                let x = plan.position(k, p, delta);
+                let v = plan.value(k, o, x[o.axis]);
+                res[k] = v.r;
                 for &i in &sums.active {
-                    jac[(k, col_of[i])] = o.w * dp[i][o.axis];
+                    jac[(k, col_of[i])] = v.slope * sums.dp_at(i, &x, beta)[o.axis];
                 }
-                if o.baro
-                    && let Some(c) = baro_col
-                {
-                    jac[(k, c)] = -o.w;
-                }
+                plan.for_extra(k, o.axis, delta, sig.dt[row], |i, d| {
+                    if col_of[i] != usize::MAX {
+                        jac[(k, col_of[i])] += v.slope * d;
+                    }
+                });
                 k += 1;
             }
         });

@@ -19,6 +19,7 @@
 mod adjoint;
 mod jacobian;
 mod normal;
+mod observe;
 pub mod rotation;
 mod start;
 mod sweep;
@@ -98,8 +99,10 @@ pub(crate) struct Observation {
     pub axis: usize,
     pub target: f64,
     pub w: f64,
-    /// A barometric row: the baro offset is added to the target.
+    /// A barometric row (compared with the barometer, not GPS).
     pub baro: bool,
+    /// Time of the fix (log time, s).
+    pub t: f64,
 }
 
 /// A model: the ride's signals, the effects acting on them and where each
@@ -158,7 +161,7 @@ impl Model {
         let zeros = [0.0; 3];
         let orientation = find(&|e| e.initial_orientation(&zeros).is_some());
         let position = find(&|e| e.initial_position(&zeros).is_some());
-        let baro = find(&|e| e.baro_offset(&zeros).is_some());
+        let baro = effects.iter().position(|e| e.observes_baro());
         let gyro_chain = (0..effects.len())
             .filter(|&e| effects[e].acts_on_gyro())
             .collect();
@@ -177,6 +180,7 @@ impl Model {
                     target: fix.en[axis],
                     w: wh,
                     baro: false,
+                    t: fix.t,
                 });
             }
             if let Some(up) = fix.up {
@@ -186,6 +190,7 @@ impl Model {
                     target: up,
                     w: 1.0 / spec.sigma_vertical_m,
                     baro: false,
+                    t: fix.t,
                 });
             }
             if let (Some(b), Some(_)) = (fix.baro, baro) {
@@ -195,6 +200,7 @@ impl Model {
                     target: b,
                     w: 1.0 / spec.sigma_baro_m,
                     baro: true,
+                    t: fix.t,
                 });
             }
         }
@@ -325,15 +331,9 @@ impl Model {
         (q0, self.start.position + dp, phi)
     }
 
-    /// Whether the model fits a barometer offset (vertical rows use the barometer).
-    pub fn has_baro_offset(&self) -> bool {
+    /// Whether barometric rows are observed (the model fits the barometer's offset).
+    pub fn observes_baro(&self) -> bool {
         self.baro.is_some()
-    }
-
-    pub(crate) fn baro_offset(&self, theta: &[f64]) -> f64 {
-        self.baro
-            .and_then(|e| self.effects[e].baro_offset(self.params_of(e, theta)))
-            .unwrap_or(0.0)
     }
 
     /// Prior rows of all effects, with columns in the global parameter vector.

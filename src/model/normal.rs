@@ -125,8 +125,7 @@ impl Model {
         // Forward sweep: per observation, h_o, the global row and the partial block row.
         let obs = &self.observations;
         let no = obs.len();
-        let baro_param = self.baro.map(|e| self.offsets[e]).filter(|&i| free[i]);
-        let baro = self.baro_offset(theta);
+        let plan = self.obs_plan(theta);
         let mut h = vec![V9::zeros(); no];
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
@@ -137,21 +136,23 @@ impl Model {
             .map(|b| vec![V9::zeros(); b.params.len()])
             .collect();
         let mut next_block = 0;
-        self.prefix_sweep(theta, free, |row, p, sums| {
-            while k < no && obs[k].row == row {
+        self.prefix_sweep(theta, free, &plan.row, |row, p_row, delta, sums| {
+            while k < no && plan.row[k] == row {
                 let o = &obs[k];
                 let a = o.axis;
-                let target = if o.baro { o.target + baro } else { o.target };
-                r[k] = o.w * (p[a] - target);
+                let beta = plan.beta[k];
+                let p = plan.position(k, p_row, delta);
+                let v = plan.value(k, o, p[a]);
+                let w = v.slope;
+                r[k] = v.r;
                 for (g, &i) in globals.iter().enumerate() {
-                    jg[(k, g)] = o.w * sums.dp(i, p)[a];
+                    jg[(k, g)] = w * sums.dp_at(i, &p, beta)[a];
                 }
-                if o.baro
-                    && let Some(i) = baro_param
-                    && let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX)
-                {
-                    jg[(k, g)] -= o.w;
-                }
+                plan.for_extra(k, a, delta, sig.dt[row], |i, d| {
+                    if let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX) {
+                        jg[(k, g)] += w * d;
+                    }
+                });
                 // h_o: w (row a of -[p]x, -e_a, e_a).
                 let mut hv = V9::zeros();
                 match a {
@@ -170,12 +171,12 @@ impl Model {
                 }
                 hv[3 + a] = -1.0;
                 hv[6 + a] = 1.0;
-                h[k] = hv * o.w;
+                h[k] = hv * w;
                 let b = block_at[row];
                 if b != u32::MAX {
                     let mut vals = [0.0; 3];
                     for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
-                        vals[kk] = o.w * sums.dp(i, p)[a];
+                        vals[kk] = w * sums.dp_at(i, &p, beta)[a];
                     }
                     jb[k] = (b, vals);
                 }
@@ -205,7 +206,7 @@ impl Model {
                 if b.last == usize::MAX {
                     no
                 } else {
-                    obs.partition_point(|o| o.row <= b.last)
+                    plan.row.partition_point(|&row| row <= b.last)
                 }
             })
             .collect();

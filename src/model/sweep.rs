@@ -76,6 +76,7 @@ impl Model {
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
         let (mut q, mut p, _) = self.initial_state(theta);
+        let (f, _) = self.forward_axis(theta);
         let inc = self.spec.increment;
         visit(0, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
@@ -83,7 +84,7 @@ impl Model {
             let th = rates[j] * sig.dt[j];
             q *= inc.quaternion(&th);
             let d = dist[j];
-            p += super::rotation::forward(&q) * d;
+            p += q * (f * d);
             visit(j, &q, &p, &th, d);
         }
     }
@@ -120,13 +121,15 @@ impl Model {
 
     /// Weighted residuals (observations, then priors) of a computed path.
     pub fn residuals_of(&self, theta: &[f64], path: &Trajectory) -> Vec<f64> {
-        let baro = self.baro_offset(theta);
+        let plan = self.obs_plan(theta);
         let mut r: Vec<f64> = self
             .observations
             .iter()
-            .map(|o| {
-                let target = if o.baro { o.target + baro } else { o.target };
-                o.w * (path.p[o.row][o.axis] - target)
+            .enumerate()
+            .map(|(k, o)| {
+                let j = plan.row[k];
+                let delta = path.p[j] - path.p[j.max(1) - 1];
+                plan.value(k, o, plan.x(k, o.axis, &path.p[j], &delta)).r
             })
             .collect();
         r.extend(self.prior_rows(theta).residuals);
@@ -145,17 +148,19 @@ impl Model {
 
     /// Cost and the unweighted squared misfits per kind of row, in one sweep.
     pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
-        let baro = self.baro_offset(theta);
+        let plan = self.obs_plan(theta);
         let obs = &self.observations;
         let mut k = 0;
         let mut ev = Evaluation::default();
+        let mut prev = Vector3::zeros();
         self.sweep(theta, |j, _, p, _, _| {
-            while k < obs.len() && obs[k].row == j {
+            let delta = p - prev;
+            prev = *p;
+            while k < obs.len() && plan.row[k] == j {
                 let o = &obs[k];
-                let target = if o.baro { o.target + baro } else { o.target };
-                let metres = p[o.axis] - target;
-                let r = o.w * metres;
-                ev.cost += r * r;
+                let v = plan.value(k, o, plan.x(k, o.axis, p, &delta));
+                let metres = v.metres;
+                ev.cost += v.r * v.r;
                 let slot = match (o.axis, o.baro) {
                     (2, true) => 2,
                     (2, false) => 1,
