@@ -20,14 +20,26 @@
 //! whatever the combination. Adding an effect = one file here plus one line
 //! in [`build`].
 
+mod baro_drift;
 mod baro_offset;
+mod gps_lag;
+mod gps_outliers;
 mod gyro_bias;
+mod gyro_bias_channel;
 mod gyro_bias_segments;
+mod gyro_scale;
+pub mod mount_misalignment;
 mod initial_orientation;
 mod initial_position;
 mod odometer_gain;
 
+pub use baro_drift::BaroDrift;
 pub use baro_offset::BaroOffset;
+pub use gps_lag::GpsLag;
+pub use gps_outliers::GpsOutliers;
+pub use gyro_bias_channel::GyroBiasChannel;
+pub use gyro_scale::GyroScale;
+pub use mount_misalignment::MountMisalignment;
 pub use gyro_bias::DEG_PER_RAD;
 pub use gyro_bias::GyroBias;
 pub use gyro_bias_segments::GyroBiasSegments;
@@ -96,6 +108,11 @@ impl<V: Copy + Default> Columns<V> {
     #[inline]
     pub fn as_slice(&self) -> &[(usize, V)] {
         &self.cols[..self.len]
+    }
+
+    #[inline]
+    pub fn as_mut_slice(&mut self) -> &mut [(usize, V)] {
+        &mut self.cols[..self.len]
     }
 }
 
@@ -319,20 +336,26 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
     if signals.has_baro {
         ids.push("baro_offset".into());
     }
-    let order = |id: &str| REGISTRY.iter().position(|r| *r == id).unwrap_or(usize::MAX);
+    let order = |id: &str| registry_position(id).unwrap_or(usize::MAX);
     ids.sort_by_key(|id| order(id));
     ids.dedup();
     Ok(ids)
 }
 
 /// All ids in registry order (the order effects are chained in).
-pub const REGISTRY: [&str; 6] = [
+pub const REGISTRY: [&str; 12] = [
     "initial_position",
     "initial_orientation",
     "odometer_gain",
     "gyro_bias",
     "gyro_bias_segments",
+    CHANNEL_PREFIX,
+    "gyro_scale",
+    "mount_misalignment",
+    "gps_lag",
     "baro_offset",
+    "baro_drift",
+    "gps_outliers",
 ];
 
 /// Effects a user can add to the paper's model, with one line on what each
@@ -343,13 +366,11 @@ pub fn catalogue(channels: &[String]) -> Vec<(String, String)> {
         .filter(|(id, _)| known(id))
         .map(|(id, about)| (id.to_string(), about.to_string()))
         .collect();
-    if known_prefix(CHANNEL_PREFIX) {
-        for c in channels {
-            out.push((
-                format!("{CHANNEL_PREFIX}{c}"),
-                format!("gyro bias linear in the log's {c} channel (3 per-axis slopes)"),
-            ));
-        }
+    for c in channels {
+        out.push((
+            format!("{CHANNEL_PREFIX}{c}"),
+            format!("gyro bias linear in the log's {c} channel (3 per-axis slopes)"),
+        ));
     }
     out
 }
@@ -378,12 +399,15 @@ const CATALOGUE: [(&str, &str); 5] = [
     ),
 ];
 
-fn known_prefix(prefix: &str) -> bool {
-    REGISTRY.iter().any(|r| r.starts_with(prefix))
+/// Place of an id in [`REGISTRY`] (`gyro_bias_channel:<c>` at its prefix).
+fn registry_position(id: &str) -> Option<usize> {
+    REGISTRY.iter().position(|r| {
+        *r == id || (*r == CHANNEL_PREFIX && id.len() > r.len() && id.starts_with(r))
+    })
 }
 
 fn known(id: &str) -> bool {
-    REGISTRY.contains(&id)
+    registry_position(id).is_some()
 }
 
 /// Build one effect by id.
@@ -398,15 +422,27 @@ pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Ef
             spec.segment_s,
             spec.bias_walk_dps_sqrt_s,
         )?),
-        "baro_offset" => {
+        "baro_offset" | "baro_drift" => {
             if !signals.has_baro {
                 return Err(ModelError::NotApplicable {
                     effect: id.into(),
                     reason: "the log has no baro_alt_m column".into(),
                 });
             }
-            Box::new(BaroOffset)
+            if id == "baro_offset" {
+                Box::new(BaroOffset)
+            } else {
+                Box::new(BaroDrift)
+            }
         }
+        "gyro_scale" => Box::new(GyroScale),
+        "mount_misalignment" => Box::new(MountMisalignment),
+        "gps_lag" => Box::new(GpsLag),
+        "gps_outliers" => Box::new(GpsOutliers::new(signals, spec.sigma_horizontal_m)),
+        channel if channel.starts_with(CHANNEL_PREFIX) => Box::new(GyroBiasChannel::new(
+            signals,
+            &channel[CHANNEL_PREFIX.len()..],
+        )?),
         other => return Err(ModelError::UnknownEffect(other.to_string())),
     })
 }

@@ -17,13 +17,49 @@ fn model(increment: Increment, walk: Option<f64>) -> Model {
     Model::new(sig, spec).unwrap()
 }
 
-/// A parameter vector away from the start so every term is non-trivial.
+/// The paper's model plus the whole effect catalogue, on a simulated ride
+/// with barometer and temperature channel.
+fn catalogue_model() -> Model {
+    let sig = Arc::new(crate::testing::simulated_signals(
+        4,
+        60.0,
+        &["gps_lag", "gps_outliers"],
+    ));
+    let mut effects = vec!["paper".to_string()];
+    effects.extend(
+        effects::catalogue(&["temp_c".to_string()])
+            .into_iter()
+            .map(|(id, _)| id),
+    );
+    let spec = ModelSpec {
+        effects,
+        segment_s: 7.0,
+        ..ModelSpec::default()
+    };
+    let m = Model::new(sig, spec).unwrap();
+    assert_eq!(m.effects().len(), 12, "{:?}", m.effect_ids());
+    m
+}
+
+/// A parameter vector away from the start so every term is non-trivial; the
+/// lag is set so that fixes are interpolated inside steps, away from row times.
 fn perturbed(m: &Model) -> Vec<f64> {
     let mut p = m.initial_params();
     for (i, v) in p.iter_mut().enumerate() {
         *v += 1e-3 * ((i as f64 * 1.7).sin());
     }
+    if let Some(e) = m.effect_index("gps_lag") {
+        p[m.range(e).start] = 0.4337;
+    }
     p
+}
+
+fn models() -> Vec<Model> {
+    vec![
+        model(Increment::Exact, Some(0.01)),
+        model(Increment::SmallAngle, Some(0.01)),
+        catalogue_model(),
+    ]
 }
 
 fn fd_gradient(m: &Model, p: &[f64], i: usize) -> f64 {
@@ -36,8 +72,8 @@ fn fd_gradient(m: &Model, p: &[f64], i: usize) -> f64 {
 
 #[test]
 fn gradient_matches_finite_differences() {
-    for inc in [Increment::Exact, Increment::SmallAngle] {
-        let m = model(inc, Some(0.01));
+    for m in models() {
+        let inc = m.effect_ids();
         let p = perturbed(&m);
         let (cost, g) = m.gradient(&p);
         assert!((cost - m.cost(&p)).abs() < 1e-9 * cost);
@@ -57,8 +93,8 @@ fn gradient_matches_finite_differences() {
 
 #[test]
 fn jacobian_matches_finite_differences_and_the_gradient() {
-    for inc in [Increment::Exact, Increment::SmallAngle] {
-        let m = model(inc, Some(0.01));
+    for m in models() {
+        let inc = m.effect_ids();
         let p = perturbed(&m);
         let free = vec![true; m.n_params()];
         let lin = m.linearise(&p, &free);
@@ -108,8 +144,11 @@ fn jacobian_of_a_subset_is_the_matching_columns() {
 
 #[test]
 fn moment_normal_equations_equal_the_dense_ones() {
-    for walk in [None, Some(0.01)] {
-        let m = model(Increment::Exact, walk);
+    for m in [
+        model(Increment::Exact, None),
+        model(Increment::Exact, Some(0.01)),
+        catalogue_model(),
+    ] {
         let p = perturbed(&m);
         for roles in [
             vec![effects::Role::Global, effects::Role::Segments],
