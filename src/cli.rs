@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use gyropath::diagnosis::{Diagnosis, Folds};
 use gyropath::export::{FitReport, write_atomically, write_path_csv};
 use gyropath::loading;
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
@@ -32,6 +33,8 @@ pub enum Command {
     Fit(FitArgs),
     /// Write a simulated bicycle ride (and its true path).
     Simulate(SimulateArgs),
+    /// Fit the model, then rank the effects it lacks by how much each lowers the held-out error.
+    Diagnose(DiagnoseArgs),
     /// Open the app on a ride log (without arguments, `gyropath` opens it on the bundled sample).
     Open(OpenArgs),
 }
@@ -58,7 +61,44 @@ pub enum IncrementArg {
 pub struct FitArgs {
     /// Ride log (CSV, see the ride-log format).
     pub ride: PathBuf,
-    /// Effects of the model, comma separated (`paper` = the paper's five).
+    #[command(flatten)]
+    pub settings: SettingsArgs,
+    /// Write the reconstructed path here (CSV: t_s,lat_deg,lon_deg,alt_m,...).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the fit report here (JSON).
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// Ride log (CSV, see the ride-log format).
+    pub ride: PathBuf,
+    #[command(flatten)]
+    pub settings: SettingsArgs,
+    /// Write the diagnosis here (JSON).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Number of validation folds.
+    #[arg(long, default_value_t = 5)]
+    pub folds: usize,
+    /// Length of a validation block of GPS fixes (s).
+    #[arg(long, default_value_t = 60.0)]
+    pub block_s: f64,
+    /// Print nothing but errors and the table.
+    #[arg(long, short)]
+    pub quiet: bool,
+}
+
+/// The model and optimiser options shared by `fit` and `diagnose`.
+#[derive(Debug, Args)]
+pub struct SettingsArgs {
+    /// Effects of the model, comma separated (`paper` = the paper's five; catalogue:
+    /// gyro_scale, gps_lag, mount_misalignment, gyro_bias_channel:<column>, baro_drift, gps_outliers).
     #[arg(long, default_value = "paper")]
     pub effects: String,
     /// Length of a bias segment (s).
@@ -85,15 +125,6 @@ pub struct FitArgs {
     /// Increment map: exact exponential or the paper's small-angle quaternion.
     #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
     pub increment: IncrementArg,
-    /// Write the reconstructed path here (CSV: t_s,lat_deg,lon_deg,alt_m,...).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Write the fit report here (JSON).
-    #[arg(long)]
-    pub report: Option<PathBuf>,
-    /// Print nothing but errors.
-    #[arg(long, short)]
-    pub quiet: bool,
 }
 
 #[derive(Debug, Args)]
@@ -134,7 +165,7 @@ fn split_list(s: &str) -> Vec<String> {
         .collect()
 }
 
-impl FitArgs {
+impl SettingsArgs {
     pub fn settings(&self) -> Result<FitSettings> {
         let walk = match self.bias_walk.trim() {
             "none" | "off" => None,
@@ -203,7 +234,7 @@ fn progress_line(r: &IterationReport) -> String {
 
 pub fn fit(args: &FitArgs) -> Result<()> {
     let started = Instant::now();
-    let settings = args.settings()?;
+    let settings = args.settings.settings()?;
     let signals = Arc::new(load_signals(&args.ride)?);
     if !args.quiet {
         for w in &signals.warnings {
@@ -313,4 +344,102 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
         }
     );
     Ok(())
+}
+
+pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
+    let started = Instant::now();
+    let settings = args.settings.settings()?;
+    if args.folds < 2 {
+        anyhow::bail!("--folds must be at least 2, got {}", args.folds);
+    }
+    if !(args.block_s.is_finite() && args.block_s >= 5.0) {
+        anyhow::bail!("--block-s must be at least 5 s, got {}", args.block_s);
+    }
+    let signals = Arc::new(load_signals(&args.ride)?);
+    if !args.quiet {
+        for w in &signals.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    let folds = Folds {
+        block_s: args.block_s,
+        k: args.folds,
+    };
+    let quiet = args.quiet;
+    let progress = move |msg: &str| {
+        if !quiet {
+            eprintln!("{msg}");
+        }
+    };
+    let diagnosis = gyropath::diagnosis::diagnose(signals, &settings, &folds, &progress)?;
+    if let Some(path) = &args.json {
+        write_atomically(path, Some(&args.ride), |w| {
+            serde_json::to_writer_pretty(&mut *w, &diagnosis).map_err(std::io::Error::other)?;
+            writeln!(w)
+        })?;
+    }
+    print_diagnosis(&diagnosis);
+    if !args.quiet {
+        println!("time      {:.2} s", started.elapsed().as_secs_f64());
+    }
+    Ok(())
+}
+
+fn print_diagnosis(d: &Diagnosis) {
+    println!("model     {}", d.model.join(", "));
+    println!(
+        "error     fit {:.3} m, held-out {:.3} m ({}-fold over {:.0} s blocks{})",
+        d.fit_rms_m,
+        d.heldout_rms_m,
+        d.folds.k,
+        d.folds.block_s,
+        if d.excluded_fixes > 0 {
+            format!(", {} GPS jumps left out", d.excluded_fixes)
+        } else {
+            String::new()
+        }
+    );
+    println!(
+        "residual  along {:.2} m, cross {:.2} m{}",
+        d.residual_rms.along_m,
+        d.residual_rms.cross_m,
+        d.residual_rms
+            .up_m
+            .map_or(String::new(), |u| format!(", vertical {u:.2} m"))
+    );
+    println!();
+    println!(
+        "{:<4}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",
+        "rank", "effect", "held-out", "drop", "t", "sig."
+    );
+    for (i, c) in d.ranking.iter().enumerate() {
+        if let Some(e) = &c.error {
+            println!("{:<4}{:<26}  could not be fitted: {e}", i + 1, c.effect);
+            continue;
+        }
+        let est: Vec<String> = c
+            .estimate
+            .iter()
+            .map(|(k, e)| format!("{k} {:.3} ± {:.3} {}", e.value, e.sigma, e.unit))
+            .collect();
+        println!(
+            "{:<4}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}  {}",
+            i + 1,
+            c.effect,
+            c.heldout_rms_m,
+            100.0 * c.drop,
+            c.t_statistic,
+            if c.significant { "yes" } else { "no" },
+            est.join(", ")
+        );
+    }
+    if let Some(best) = d.ranking.first().filter(|c| c.significant) {
+        println!();
+        println!("missing:  {} - {}", best.effect, best.explanation);
+    } else {
+        println!();
+        println!(
+            "nothing significant: no catalogue effect lowers the held-out error beyond chance"
+        );
+    }
 }

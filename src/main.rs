@@ -9,6 +9,7 @@ fn main() {
     let result = match &args.command {
         Some(cli::Command::Fit(a)) => cli::fit(a),
         Some(cli::Command::Simulate(a)) => cli::simulate(a),
+        Some(cli::Command::Diagnose(a)) => cli::diagnose(a),
         Some(cli::Command::Open(a)) => open_app(Some(a.ride.clone())),
         None => open_app(None),
     };

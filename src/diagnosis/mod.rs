@@ -1,10 +1,13 @@
 //! Seeing where the model fails: residuals in the frame of travel, the fitted
-//! bias per segment, and (with the effect catalogue) held-out validation and
-//! the ranking of missing effects.
+//! bias per segment, held-out validation and the ranking of missing effects.
 
+pub mod ranking;
 pub mod residuals;
+pub mod validation;
 
+pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
 pub use residuals::{FixResidual, ResidualRms, fix_residuals, rms_per_minute};
+pub use validation::{Folds, HeldOut, held_out};
 
 use crate::effects::DEG_PER_RAD;
 use crate::model::Model;

@@ -30,7 +30,8 @@ impl GpsOutliers {
         let f = &signals.fixes;
         let mut second: Vec<f64> = Vec::new();
         for w in f.windows(3) {
-            let regular = (w[1].t - w[0].t - 1.0).abs() < 0.2 && (w[2].t - w[1].t - 1.0).abs() < 0.2;
+            let regular =
+                (w[1].t - w[0].t - 1.0).abs() < 0.2 && (w[2].t - w[1].t - 1.0).abs() < 0.2;
             if regular {
                 for a in 0..2 {
                     second.push((w[2].en[a] - 2.0 * w[1].en[a] + w[0].en[a]).abs());

@@ -66,13 +66,7 @@ impl Effect for GyroBiasChannel {
     fn params(&self) -> Vec<ParamInfo> {
         ["x", "y", "z"]
             .iter()
-            .map(|a| {
-                ParamInfo::new(
-                    format!("slope_{a}"),
-                    "deg/s per unit",
-                    DEG_PER_RAD,
-                )
-            })
+            .map(|a| ParamInfo::new(format!("slope_{a}"), "deg/s per unit", DEG_PER_RAD))
             .collect()
     }
 

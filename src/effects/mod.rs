@@ -28,23 +28,23 @@ mod gyro_bias;
 mod gyro_bias_channel;
 mod gyro_bias_segments;
 mod gyro_scale;
-pub mod mount_misalignment;
 mod initial_orientation;
 mod initial_position;
+pub mod mount_misalignment;
 mod odometer_gain;
 
 pub use baro_drift::BaroDrift;
 pub use baro_offset::BaroOffset;
 pub use gps_lag::GpsLag;
 pub use gps_outliers::GpsOutliers;
-pub use gyro_bias_channel::GyroBiasChannel;
-pub use gyro_scale::GyroScale;
-pub use mount_misalignment::MountMisalignment;
 pub use gyro_bias::DEG_PER_RAD;
 pub use gyro_bias::GyroBias;
+pub use gyro_bias_channel::GyroBiasChannel;
 pub use gyro_bias_segments::GyroBiasSegments;
+pub use gyro_scale::GyroScale;
 pub use initial_orientation::InitialOrientation;
 pub use initial_position::InitialPosition;
+pub use mount_misalignment::MountMisalignment;
 pub use odometer_gain::OdometerGain;
 
 use nalgebra::{Matrix3, Vector3};
@@ -401,9 +401,9 @@ const CATALOGUE: [(&str, &str); 5] = [
 
 /// Place of an id in [`REGISTRY`] (`gyro_bias_channel:<c>` at its prefix).
 fn registry_position(id: &str) -> Option<usize> {
-    REGISTRY.iter().position(|r| {
-        *r == id || (*r == CHANNEL_PREFIX && id.len() > r.len() && id.starts_with(r))
-    })
+    REGISTRY
+        .iter()
+        .position(|r| *r == id || (*r == CHANNEL_PREFIX && id.len() > r.len() && id.starts_with(r)))
 }
 
 fn known(id: &str) -> bool {

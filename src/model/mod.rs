@@ -331,6 +331,14 @@ impl Model {
         (q0, self.start.position + dp, phi)
     }
 
+    /// The same model without the observations of the fixes where `keep(t_fix)`
+    /// is false (held-out validation); the parameter layout is unchanged.
+    pub fn withholding(&self, keep: impl Fn(f64) -> bool) -> Result<Model, ModelError> {
+        let mut m = Model::with_start(self.signals.clone(), self.spec.clone(), self.start.clone())?;
+        m.observations.retain(|o| keep(o.t));
+        Ok(m)
+    }
+
     /// Whether barometric rows are observed (the model fits the barometer's offset).
     pub fn observes_baro(&self) -> bool {
         self.baro.is_some()

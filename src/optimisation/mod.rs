@@ -215,6 +215,48 @@ impl Reconstruction {
         .with_first_window()
     }
 
+    /// Continue a fitted ride on `model` from `theta` (its own layout, e.g. from
+    /// [`Model::carry_over`]): LM over the global and segment parameters, as in
+    /// step 2, without step 1's windows. Used after adding an effect to a fitted
+    /// model or withholding fixes for validation, where the start is already close.
+    pub fn resume(model: Model, theta: Vec<f64>, settings: FitSettings) -> Result<Self, FitError> {
+        settings.validate()?;
+        check_observability(&model)?;
+        if theta.len() != model.n_params() {
+            return Err(FitError::Setting(format!(
+                "{} parameters given for a model of {}",
+                theta.len(),
+                model.n_params()
+            )));
+        }
+        let settings = FitSettings {
+            method: Method::Lm,
+            ..settings
+        };
+        let mut fit = Self {
+            lm: LmState::new(settings.damping),
+            gd: GdState::new(settings.step_size),
+            model,
+            theta,
+            settings,
+            phase: Phase::Step1,
+            iteration: 0,
+            phase_iterations: [0, 0],
+            settings_changed: false,
+            history: Vec::new(),
+            window: None,
+        };
+        if fit.has_segments() {
+            fit.phase = Phase::Step2;
+        }
+        Ok(fit)
+    }
+
+    /// Iterate to the end without observers.
+    pub fn finish(&mut self) {
+        while self.iterate().is_some() {}
+    }
+
     /// Start step 1 on the first window of the ride, if the ride is longer.
     fn with_first_window(mut self) -> Result<Self, FitError> {
         self.window = self.next_window(FIRST_WINDOW_S)?;

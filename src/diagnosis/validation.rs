@@ -1,0 +1,164 @@
+//! Held-out error: k-fold validation over contiguous blocks of GPS fixes.
+//!
+//! The fit cost always falls when parameters are added (per-segment biases
+//! can chase GPS noise), so it cannot say whether a model is better. Here the
+//! ride's fixes are cut into blocks of `block_s` seconds, block `b` goes to
+//! fold `b mod k`, and for each fold the model is refitted without that
+//! fold's fixes (warm-started from the full fit, LM to convergence) and then
+//! asked where the withheld fixes are. The held-out error of a fix is the
+//! horizontal distance between it and that prediction. Blocks are long
+//! compared with the GPS noise correlation, so a prediction cannot lean on
+//! neighbouring fixes of the same block; the random-walk prior holds the
+//! segment biases inside a withheld block.
+
+use rayon::prelude::*;
+
+use crate::model::Model;
+use crate::optimisation::{FitError, FitSettings, Reconstruction};
+
+/// How fixes are grouped for validation.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct Folds {
+    /// Block length (s).
+    pub block_s: f64,
+    /// Number of folds.
+    pub k: usize,
+}
+
+impl Default for Folds {
+    fn default() -> Self {
+        Self {
+            block_s: 60.0,
+            k: 5,
+        }
+    }
+}
+
+impl Folds {
+    /// Block index of a fix at log time `t` on a ride starting at `t0`.
+    pub fn block(&self, t: f64, t0: f64) -> usize {
+        ((t - t0) / self.block_s).floor().max(0.0) as usize
+    }
+
+    pub fn fold(&self, t: f64, t0: f64) -> usize {
+        self.block(t, t0) % self.k
+    }
+}
+
+/// Held-out errors of every fix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldOut {
+    /// Horizontal error (m) of each fix, predicted by the fit without its fold.
+    pub errors: Vec<f64>,
+    /// Block of each fix.
+    pub blocks: Vec<usize>,
+    /// LM iterations spent over all folds.
+    pub iterations: usize,
+}
+
+impl HeldOut {
+    /// RMS over the fixes where `use_fix` is true.
+    pub fn rms(&self, use_fix: &[bool]) -> f64 {
+        let (mut s, mut n) = (0.0, 0usize);
+        for (e, &u) in self.errors.iter().zip(use_fix) {
+            if u {
+                s += e * e;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            f64::NAN
+        } else {
+            (s / n as f64).sqrt()
+        }
+    }
+
+    /// Sum of squared errors per block over the fixes where `use_fix` is true.
+    pub fn block_sse(&self, use_fix: &[bool]) -> Vec<f64> {
+        let nb = self.blocks.iter().max().map_or(0, |b| b + 1);
+        let mut sse = vec![0.0; nb];
+        for ((e, &b), &u) in self.errors.iter().zip(&self.blocks).zip(use_fix) {
+            if u {
+                sse[b] += e * e;
+            }
+        }
+        sse
+    }
+}
+
+/// Horizontal misfit (m) of every fix for parameters `theta` of `model`.
+pub fn fix_errors(model: &Model, theta: &[f64]) -> Vec<f64> {
+    let traj = model.trajectory(theta);
+    super::fix_residuals(model, theta, &traj)
+        .iter()
+        .map(|r| r.horizontal())
+        .collect()
+}
+
+/// Held-out errors of `model` fitted at `theta` (the full-data fit), refitting
+/// each fold in parallel.
+pub fn held_out(
+    model: &Model,
+    theta: &[f64],
+    settings: &FitSettings,
+    folds: &Folds,
+) -> Result<HeldOut, FitError> {
+    let sig = &model.signals;
+    let t0 = sig.t[0];
+    let fold_of: Vec<usize> = sig.fixes.iter().map(|f| folds.fold(f.t, t0)).collect();
+    let results: Vec<Result<(usize, Vec<f64>, usize), FitError>> = (0..folds.k)
+        .into_par_iter()
+        .filter(|f| fold_of.contains(f))
+        .map(|f| {
+            let train = model.withholding(|t| folds.fold(t, t0) != f)?;
+            let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
+            fit.finish();
+            let iterations = fit.history().len();
+            Ok((f, fix_errors(model, fit.params()), iterations))
+        })
+        .collect();
+    let mut errors = vec![f64::NAN; sig.fixes.len()];
+    let mut iterations = 0;
+    for r in results {
+        let (f, errs, its) = r?;
+        iterations += its;
+        for (i, e) in errs.into_iter().enumerate() {
+            if fold_of[i] == f {
+                errors[i] = e;
+            }
+        }
+    }
+    Ok(HeldOut {
+        errors,
+        blocks: sig.fixes.iter().map(|f| folds.block(f.t, t0)).collect(),
+        iterations,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    #[test]
+    fn held_out_error_exceeds_the_fit_error_and_is_finite_everywhere() {
+        let sig = Arc::new(crate::testing::simulated_signals(5, 400.0, &[]));
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+        fit.finish();
+        let folds = Folds::default();
+        let ho = held_out(fit.model(), fit.params(), fit.settings(), &folds).expect("held out");
+        assert!(ho.errors.iter().all(|e| e.is_finite()));
+        let all = vec![true; ho.errors.len()];
+        let fit_rms = {
+            let e = fix_errors(fit.model(), fit.params());
+            (e.iter().map(|x| x * x).sum::<f64>() / e.len() as f64).sqrt()
+        };
+        let ho_rms = ho.rms(&all);
+        assert!(ho_rms > fit_rms, "held-out {ho_rms} vs fit {fit_rms}");
+        assert!(
+            ho_rms < 3.0 * fit_rms + 2.0,
+            "held-out {ho_rms} vs fit {fit_rms}"
+        );
+        assert_eq!(ho.block_sse(&all).len(), 7);
+    }
+}
