@@ -407,6 +407,13 @@ fn print_diagnosis(d: &Diagnosis) {
             .up_m
             .map_or(String::new(), |u| format!(", vertical {u:.2} m"))
     );
+    let strong: Vec<String> = d
+        .structure
+        .iter()
+        .take(4)
+        .map(|c| format!("{} ~ {} r={:+.2}", c.quantity, c.signal, c.r))
+        .collect();
+    println!("structure {}", strong.join(", "));
     println!();
     println!(
         "{:<4}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",

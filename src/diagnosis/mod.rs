@@ -3,10 +3,12 @@
 
 pub mod ranking;
 pub mod residuals;
+pub mod structure;
 pub mod validation;
 
 pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
 pub use residuals::{FixResidual, ResidualRms, fix_residuals, rms_per_minute};
+pub use structure::{Correlation, structure};
 pub use validation::{Folds, HeldOut, held_out};
 
 use crate::effects::DEG_PER_RAD;

@@ -3,9 +3,9 @@
 //!
 //! ## The significance rule
 //! Held-out errors are compared fix by fix on the same fixes for every
-//! candidate; fixes the base model predicts worse than
-//! `max(5 x median error, 10 m)` are left out of the comparison (GPS jumps
-//! would otherwise dominate every RMS). Per validation block `b` the paired
+//! candidate; fixes farther than `max(5 x median, 10 m)` from the base
+//! model's fitted path are left out of the comparison (GPS jumps would
+//! otherwise dominate every RMS). Per validation block `b` the paired
 //! gain is `d_b = SSE_base,b - SSE_candidate,b`. A candidate is `significant`
 //! when
 //!
@@ -76,6 +76,8 @@ pub struct Diagnosis {
     pub ranking: Vec<Candidate>,
     /// The base model's parameters (segment biases left out).
     pub estimate: BTreeMap<String, Estimate>,
+    /// Residual and segment-bias correlations with candidate signals, strongest first.
+    pub structure: Vec<super::Correlation>,
 }
 
 /// Fit `settings.model` on the ride, then rank the missing effects.
@@ -104,7 +106,7 @@ pub fn diagnose_fitted(
     let base = held_out(model, theta, settings, folds)?;
     let fit_errors = fix_errors(model, theta);
     let fit_rms = rms(&fit_errors);
-    let use_fix = comparable_fixes(&base.errors);
+    let use_fix = comparable_fixes(&fit_errors);
     let base_rms = base.rms(&use_fix);
 
     let channels: Vec<String> = sig.channels.iter().map(|(n, _)| n.clone()).collect();
@@ -141,6 +143,7 @@ pub fn diagnose_fitted(
         excluded_fixes: use_fix.iter().filter(|&&u| !u).count(),
         ranking,
         estimate: estimates(model, theta, None),
+        structure: super::structure(model, theta),
     })
 }
 
@@ -148,7 +151,8 @@ fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
 }
 
-/// Fixes used in the held-out comparison: not GPS jumps by the base model's errors.
+/// Fixes used in the held-out comparison: not GPS jumps, judged by how far
+/// each fix is from the base model's fitted path.
 fn comparable_fixes(errors: &[f64]) -> Vec<bool> {
     let mut sorted: Vec<f64> = errors.iter().copied().filter(|e| e.is_finite()).collect();
     sorted.sort_by(f64::total_cmp);
@@ -192,7 +196,7 @@ fn candidate(
     let theta = model.carry_over(base_model, base_theta);
     let settings = FitSettings {
         model: model.spec.clone(),
-        ..settings.clone()
+        ..super::validation::validation_settings(settings)
     };
     let mut fit = match Reconstruction::resume(model, theta, settings.clone()) {
         Ok(f) => f,
@@ -222,13 +226,13 @@ fn candidate(
     }
 }
 
-/// Paired t statistic of `base - candidate` over blocks that hold fixes.
+/// Paired t statistic of `ln(SSE_base / SSE_candidate)` over blocks that hold fixes.
 fn paired_t(base: &[f64], cand: &[f64]) -> f64 {
     let d: Vec<f64> = base
         .iter()
         .zip(cand)
-        .filter(|(b, _)| **b > 0.0)
-        .map(|(b, c)| b - c)
+        .filter(|(b, c)| **b > 0.0 && **c > 0.0)
+        .map(|(b, c)| (b / c).ln())
         .collect();
     let n = d.len() as f64;
     if d.len() < 2 {

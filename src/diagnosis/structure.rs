@@ -1,0 +1,191 @@
+//! Structure left in the residuals and in the fitted segment biases, against
+//! the signals a missing effect would follow.
+//!
+//! A model that lacks an effect leaves residual that is not noise: it follows
+//! something. Pearson correlations (`r` in -1..1) of
+//!
+//! - the along-track, cross-track and vertical residuals at the GPS fixes, and
+//! - the fitted total bias of every segment (x, y, z axes)
+//!
+//! with speed, turn rate, accumulated heading change, lean, time and every
+//! extra channel of the log point at the culprit: along-track residual with
+//! speed says GPS latency; cross-track residual or the yaw bias with turn rate
+//! says scale factor; a segment bias with temperature says temperature-dependent bias.
+
+use nalgebra::Vector3;
+
+use super::{fix_residuals, segment_biases};
+use crate::model::Model;
+
+/// One correlation.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Correlation {
+    /// What was correlated: `along`, `cross`, `vertical`, `bias_x`, `bias_y`, `bias_z`.
+    pub quantity: String,
+    /// Against which signal.
+    pub signal: String,
+    pub r: f64,
+    /// Number of samples (fixes or segments).
+    pub n: usize,
+}
+
+/// Pearson correlation of two equally long series (`None` if either is constant).
+pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
+    let n = x.len().min(y.len());
+    if n < 3 {
+        return None;
+    }
+    let mx = x[..n].iter().sum::<f64>() / n as f64;
+    let my = y[..n].iter().sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for i in 0..n {
+        let (a, b) = (x[i] - mx, y[i] - my);
+        sxy += a * b;
+        sxx += a * a;
+        syy += b * b;
+    }
+    (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
+}
+
+/// Per-row motion signals of the fitted path: speed (m/s), turn rate
+/// (deg/s about world up), accumulated heading change (deg), lean (deg).
+fn motion(model: &Model, theta: &[f64]) -> Vec<(String, Vec<f64>)> {
+    let sig = &model.signals;
+    let traj = model.trajectory(theta);
+    let n = sig.len();
+    let (mut speed, mut turn, mut heading, mut lean) =
+        (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+    let mut acc = 0.0;
+    for j in 1..n {
+        let dt = sig.dt[j];
+        if dt > 0.0 {
+            speed[j] = traj.d[j] / dt;
+            // World rotation of the step about up, per second.
+            let w = traj.q[j] * traj.theta[j];
+            turn[j] = w.z.to_degrees() / dt;
+            acc += w.z.abs().to_degrees();
+        }
+        heading[j] = acc;
+        // Lean: elevation of the sensor's y axis above the horizontal.
+        let y = traj.q[j] * Vector3::y();
+        lean[j] = y.z.clamp(-1.0, 1.0).asin().to_degrees();
+    }
+    let mut out = vec![
+        ("speed".to_string(), speed),
+        ("turn_rate".to_string(), turn),
+        ("heading_change".to_string(), heading),
+        ("lean".to_string(), lean),
+        ("time".to_string(), sig.t.clone()),
+    ];
+    for (name, v) in &sig.channels {
+        out.push((name.clone(), v.clone()));
+    }
+    out
+}
+
+/// Correlations of residuals and segment biases with the candidate signals,
+/// strongest first.
+pub fn structure(model: &Model, theta: &[f64]) -> Vec<Correlation> {
+    let sig = &model.signals;
+    let traj = model.trajectory(theta);
+    let res = fix_residuals(model, theta, &traj);
+    let signals = motion(model, theta);
+    let mut out = Vec::new();
+    let rows: Vec<usize> = res.iter().map(|r| r.row).collect();
+    let mut quantities: Vec<(&str, Vec<f64>)> = vec![
+        ("along", res.iter().map(|r| r.along).collect()),
+        ("cross", res.iter().map(|r| r.cross).collect()),
+    ];
+    let (up_rows, up): (Vec<usize>, Vec<f64>) =
+        res.iter().filter_map(|r| r.up.map(|u| (r.row, u))).unzip();
+    for (name, values) in &signals {
+        for (q, v) in &quantities {
+            let x: Vec<f64> = rows.iter().map(|&j| values[j]).collect();
+            if let Some(r) = pearson(&x, v) {
+                out.push(Correlation {
+                    quantity: q.to_string(),
+                    signal: name.clone(),
+                    r,
+                    n: v.len(),
+                });
+            }
+        }
+        let x: Vec<f64> = up_rows.iter().map(|&j| values[j]).collect();
+        if let Some(r) = pearson(&x, &up) {
+            out.push(Correlation {
+                quantity: "vertical".into(),
+                signal: name.clone(),
+                r,
+                n: up.len(),
+            });
+        }
+    }
+    quantities.clear();
+    // Segment biases against the segment means of each signal.
+    let segs = segment_biases(model, theta);
+    if segs.len() >= 3 {
+        let bounds: Vec<(usize, usize)> = segs
+            .iter()
+            .map(|s| {
+                let a = sig.t.partition_point(|&t| t < s.t0);
+                let b = sig
+                    .t
+                    .partition_point(|&t| t < s.t1)
+                    .max(a + 1)
+                    .min(sig.len());
+                (a.min(sig.len() - 1), b)
+            })
+            .collect();
+        for (name, values) in &signals {
+            let x: Vec<f64> = bounds
+                .iter()
+                .map(|&(a, b)| values[a..b].iter().sum::<f64>() / (b - a) as f64)
+                .collect();
+            for (axis, q) in ["bias_x", "bias_y", "bias_z"].iter().enumerate() {
+                let y: Vec<f64> = segs.iter().map(|s| s.bias_dps[axis]).collect();
+                if let Some(r) = pearson(&x, &y) {
+                    out.push(Correlation {
+                        quantity: q.to_string(),
+                        signal: name.clone(),
+                        r,
+                        n: y.len(),
+                    });
+                }
+            }
+        }
+    }
+    out.sort_by(|a, b| b.r.abs().total_cmp(&a.r.abs()));
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::optimisation::{FitSettings, Reconstruction};
+    use std::sync::Arc;
+
+    #[test]
+    fn pearson_of_known_series() {
+        let x = [1.0, 2.0, 3.0, 4.0];
+        assert!((pearson(&x, &[2.0, 4.0, 6.0, 8.0]).unwrap_or(0.0) - 1.0).abs() < 1e-12);
+        assert!((pearson(&x, &[8.0, 6.0, 4.0, 2.0]).unwrap_or(0.0) + 1.0).abs() < 1e-12);
+        assert_eq!(pearson(&x, &[1.0, 1.0, 1.0, 1.0]), None);
+    }
+
+    #[test]
+    fn a_temperature_driven_bias_shows_in_the_segment_biases() {
+        let sig = Arc::new(crate::testing::simulated_signals(
+            8,
+            900.0,
+            &["gyro_bias_channel:temp_c"],
+        ));
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+        fit.finish();
+        let s = structure(fit.model(), fit.params());
+        let temp_z = s
+            .iter()
+            .find(|c| c.quantity == "bias_z" && c.signal == "temp_c")
+            .expect("bias_z vs temp_c");
+        assert!(temp_z.r.abs() > 0.6, "{temp_z:?}");
+    }
+}
