@@ -138,12 +138,79 @@ fn bad_input_fails_with_one_line_naming_file_line_and_column() {
 }
 
 #[test]
-fn no_arguments_prints_usage() {
-    let out = gyropath(&[]);
+fn help_lists_every_command() {
+    let out = gyropath(&["--help"]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
+    for cmd in ["fit", "simulate", "diagnose", "open"] {
+        assert!(text.contains(cmd), "{cmd} missing from: {text}");
+    }
+}
+
+#[test]
+fn diagnose_writes_the_documented_json_shape() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("lag.csv");
+    let out = gyropath(&[
+        "simulate",
+        "--seed",
+        "12",
+        "--duration",
+        "420",
+        "--hidden",
+        "gps_lag",
+        "--out",
+        s(&ride),
+    ]);
     assert!(
-        text.contains("Usage") && text.contains("fit") && text.contains("simulate"),
-        "{text}"
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
     );
+    let json = dir.path().join("diag.json");
+    let out = gyropath(&["diagnose", s(&ride), "--json", s(&json), "--quiet"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        table.contains("held-out") && table.contains("gps_lag"),
+        "{table}"
+    );
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(
+        d["model"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m == "gyro_bias_segments")
+    );
+    assert!(d["fit_rms_m"].as_f64().unwrap() > 0.0);
+    assert!(d["heldout_rms_m"].as_f64().unwrap() > 0.0);
+    let ranking = d["ranking"].as_array().unwrap();
+    assert!(ranking.len() >= 5, "{ranking:?}");
+    for c in ranking {
+        for key in [
+            "effect",
+            "heldout_rms_m",
+            "drop",
+            "significant",
+            "estimate",
+            "explanation",
+        ] {
+            assert!(c.get(key).is_some(), "{key} missing in {c}");
+        }
+    }
+    assert_eq!(ranking[0]["effect"], "gps_lag");
+    assert!(ranking[0]["estimate"]["lag"]["sigma"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn diagnose_refuses_bad_fold_settings() {
+    let out = gyropath(&["diagnose", "nope.csv", "--folds", "1"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--folds"));
 }

@@ -5,19 +5,23 @@
 //! Held-out errors are compared fix by fix on the same fixes for every
 //! candidate; fixes farther than `max(5 x median, 10 m)` from the base
 //! model's fitted path are left out of the comparison (GPS jumps would
-//! otherwise dominate every RMS). Per validation block `b` the paired
-//! gain is `d_b = SSE_base,b - SSE_candidate,b`. A candidate is `significant`
-//! when
+//! otherwise dominate every RMS). Per validation block `b` the paired gain is
+//! `d_b = ln(SSE_base,b / SSE_candidate,b)` and over the `B` blocks that hold
+//! fixes `t = mean(d) / (sd(d) / sqrt(B))`. With `drop = 1 - rms_candidate / rms_base`,
+//! a candidate is `significant` when
 //!
 //! ```text
-//! t = mean(d) / (sd(d) / sqrt(B)) >= 3     and     drop = 1 - rms_candidate / rms_base >= 2 %
+//! drop >= 2 %   and   ( t >= 3   or   (drop >= 10 %  and  t >= 1.5) )
 //! ```
 //!
-//! over the `B` blocks that hold fixes: the gain must be consistent across the
-//! ride (blocks are a minute apart, so nearly independent; `t >= 3` is about a
-//! 0.5 % false-alarm rate for 10-30 blocks) and large enough to matter. An
-//! effect that only chases noise improves some blocks and worsens others and
-//! fails the first test; one that fixes a real misfit improves nearly all.
+//! A gain must be consistent across the ride (blocks are a minute apart, so
+//! nearly independent: `t >= 3` is about a 0.5 % false alarm for 10-30
+//! blocks), or large and spread over more than one block: a gain that comes
+//! from a single block gives `t` close to 1 whatever its size (that is what
+//! extra freedom at the ends of a ride does), so `t >= 1.5` rejects it, and
+//! on simulated rides without a hidden effect no candidate lowered the
+//! held-out error by more than 6 % (README, diagnosis table). An effect that
+//! only chases noise improves some blocks and worsens others.
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -32,10 +36,10 @@ use crate::optimisation::lm::damped_solve;
 use crate::optimisation::{FitError, FitSettings, Reconstruction};
 use crate::signals::Signals;
 
-/// Minimum `t` statistic of the paired block gains for `significant`.
-pub const MIN_T: f64 = 3.0;
-/// Minimum relative drop of the held-out RMS for `significant`.
-pub const MIN_DROP: f64 = 0.02;
+/// The significance rule (see the module documentation).
+pub fn significant(drop: f64, t: f64) -> bool {
+    drop >= 0.02 && (t >= 3.0 || (drop >= 0.10 && t >= 1.5))
+}
 
 /// A fitted parameter with its standard deviation (1 sigma), in display units.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -194,15 +198,28 @@ fn candidate(
         Err(e) => return failed(e.to_string()),
     };
     let theta = model.carry_over(base_model, base_theta);
-    let settings = FitSettings {
+    let full_settings = FitSettings {
         model: model.spec.clone(),
-        ..super::validation::validation_settings(settings)
+        ..settings.clone()
     };
-    let mut fit = match Reconstruction::resume(model, theta, settings.clone()) {
+    let settings = super::validation::validation_settings(&full_settings);
+    let signals = model.signals.clone();
+    let mut resumed = match Reconstruction::resume(model, theta, settings.clone()) {
         Ok(f) => f,
         Err(e) => return failed(e.to_string()),
     };
-    fit.finish();
+    resumed.finish();
+    // A model that lacks an effect can settle in a poor basin (a mount error
+    // of a few degrees does that); the candidate may need the whole two-step
+    // fit from the start guess to show what it can do. Keep the better fit.
+    let fresh = Reconstruction::new(signals, full_settings).map(|mut f| {
+        f.finish();
+        f
+    });
+    let fit = match fresh {
+        Ok(f) if f.stats().cost < resumed.stats().cost => f,
+        _ => resumed,
+    };
     let ho = match held_out(fit.model(), fit.params(), &settings, folds) {
         Ok(h) => h,
         Err(e) => return failed(e.to_string()),
@@ -217,7 +234,7 @@ fn candidate(
         effect: id.to_string(),
         heldout_rms_m: heldout,
         drop,
-        significant: t >= MIN_T && drop >= MIN_DROP,
+        significant: significant(drop, t),
         t_statistic: t,
         fit_rms_m: rms(&fix_errors(fit.model(), fit.params())),
         estimate,

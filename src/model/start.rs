@@ -38,6 +38,10 @@ pub struct StartGuess {
 
 /// Chords shorter than this give no course (m).
 const MIN_CHORD_M: f64 = 2.0;
+/// The heading and yaw-bias guess uses course samples from this much of the
+/// start of the ride (s), or more until it has [`MIN_HEADING_SAMPLES`].
+const HEADING_FIT_S: f64 = 180.0;
+const MIN_HEADING_SAMPLES: usize = 60;
 /// Consecutive fixes further apart than this are not used for a course (s).
 const MAX_FIX_GAP_S: f64 = 2.5;
 
@@ -94,23 +98,46 @@ impl StartGuess {
             let mid = (a.row + b.row) / 2;
             samples.push((sig.t[mid] - t0, dn.atan2(de) - psi[mid], chord));
         }
+        // Only the start of the ride: over many minutes an error of a few
+        // hundredths of a deg/s in the level-bias guess tilts the raw attitude
+        // by tens of degrees and corrupts the raw heading, and the bias itself
+        // drifts. Step 1 starts on the first minutes, which is what needs the guess.
+        let enough = samples
+            .iter()
+            .position(|s| s.0 >= HEADING_FIT_S)
+            .unwrap_or(samples.len())
+            .max(MIN_HEADING_SAMPLES.min(samples.len()));
+        samples.truncate(enough);
         if samples.len() < 2 {
             return Err(StartError::NoMotion {
                 file: sig.source.clone(),
                 min_m: MIN_CHORD_M,
             });
         }
-        // Slope from neighbouring samples, robust to wrap-around and outliers.
-        let mut slopes: Vec<f64> = samples
-            .windows(2)
-            .filter(|w| w[1].0 - w[0].0 < 3.0 * MAX_FIX_GAP_S)
-            .map(|w| wrap(w[1].1 - w[0].1) / (w[1].0 - w[0].0))
-            .collect();
-        let slope0 = if slopes.is_empty() {
-            0.0
-        } else {
-            median(&mut slopes)
+        // Slope (the yaw-bias error of the guess): the rate that lines the
+        // samples up best on the circle, `max_s |sum_k w_k exp(i (d_k - s t_k))|`,
+        // searched over +-10 deg/s in steps that turn the last sample by at most
+        // 0.05 rad. Robust to wrap-around and to outliers, unlike a median of
+        // neighbouring differences, whose noise (tenths of a radian per second)
+        // can wrap the detrended samples over a few minutes.
+        let span = samples.last().map_or(1.0, |s| s.0).max(1.0);
+        let step = 0.05 / span;
+        let limit = 10f64.to_radians();
+        let coherence = |slope: f64| {
+            let (s, c) = samples.iter().fold((0.0, 0.0), |(s, c), &(t, d, w)| {
+                let x = d - slope * t;
+                (s + w * x.sin(), c + w * x.cos())
+            });
+            s.hypot(c)
         };
+        let n_steps = (limit / step).ceil() as i64;
+        let slope0 = (-n_steps..=n_steps)
+            .map(|k| k as f64 * step)
+            .map(|slope| (slope, coherence(slope)))
+            .fold((0.0, f64::NEG_INFINITY), |best, x| {
+                if x.1 > best.1 { x } else { best }
+            })
+            .0;
         // Offset: circular mean of the detrended samples.
         let (s, c) = samples.iter().fold((0.0, 0.0), |(s, c), &(t, d, w)| {
             let x = d - slope0 * t;

@@ -2,7 +2,14 @@
 //!
 //! Step 1 fits the global parameters (constant bias, start orientation and
 //! position, odometer gain, barometer offset) with Levenberg-Marquardt (a
-//! Gauss-Newton method with a trust region). Step 2 fits the per-segment
+//! Gauss-Newton method with a trust region) on the first two minutes of the
+//! ride, then on a window that grows by half each time the fit on it converges.
+//! Past the first window a constant bias no longer holds (MEMS biases drift
+//! by tenths of a deg/s over minutes, and a roll tilt with a matching
+//! roll-axis bias can fit a drifting window and then roll the path over),
+//! so with LM the widened windows fit the segment biases instead, held
+//! beyond the window by their random-walk prior (without a prior, or with
+//! gradient descent as step 2, the constant bias as in the paper). Step 2 fits the per-segment
 //! biases with gradient descent or LM; LM also refines the globals except the
 //! constant bias, which the segments absorb. [`Reconstruction::iterate`] does
 //! one iteration and reports it; [`Reconstruction::apply_settings`] changes
@@ -187,9 +194,12 @@ pub struct Reconstruction {
     history: Vec<IterationReport>,
     /// Step 1's growing window (s of ride) and its model; `None` once it covers the ride.
     window: Option<(f64, Model)>,
+    /// Step 1 has moved past its first window: from here on it fits the
+    /// segment biases instead of the constant bias (when the model has a prior).
+    widened: bool,
 }
 
-/// Step 1's first window (s); it doubles each time the fit on it converges.
+/// Step 1's first window (s); it grows by half each time the fit on it converges.
 const FIRST_WINDOW_S: f64 = 120.0;
 
 impl Reconstruction {
@@ -211,6 +221,7 @@ impl Reconstruction {
             settings_changed: false,
             history: Vec::new(),
             window: None,
+            widened: false,
         }
         .with_first_window()
     }
@@ -245,6 +256,7 @@ impl Reconstruction {
             settings_changed: false,
             history: Vec::new(),
             window: None,
+            widened: true,
         };
         if fit.has_segments() {
             fit.phase = Phase::Step2;
@@ -308,8 +320,23 @@ impl Reconstruction {
         FitStats::of(&self.model, &self.theta)
     }
 
+    /// Whether step 1 fits segment biases on its widened windows: only with the
+    /// random-walk prior, which holds the segments beyond the window (without it
+    /// they would be unconstrained there).
+    /// With gradient descent as step 2, step 1 stays the paper's constant-bias
+    /// fit, so that step 2 has the segment biases to fit.
+    fn windows_fit_segments(&self) -> bool {
+        self.widened
+            && self.settings.method == Method::Lm
+            && self.has_segments()
+            && self.settings.model.bias_walk_dps_sqrt_s.is_some()
+    }
+
     fn mask(&self, phase: Phase) -> Vec<bool> {
         match (phase, self.settings.method) {
+            (Phase::Step1, _) if self.windows_fit_segments() => {
+                self.model.free_mask(&[Role::Global, Role::Segments])
+            }
             (Phase::Step1, _) => self.model.free_mask(&[Role::Global, Role::Step1Only]),
             (_, Method::Lm) => self.model.free_mask(&[Role::Global, Role::Segments]),
             (_, Method::Gd) => self.model.free_mask(&[Role::Segments]),
@@ -372,8 +399,9 @@ impl Reconstruction {
         {
             // Widen the window and keep fitting step 1.
             let length = *length;
-            if let Ok(next) = self.next_window(2.0 * length) {
+            if let Ok(next) = self.next_window(1.5 * length) {
                 self.window = next;
+                self.widened = true;
                 self.lm = LmState::new(self.settings.damping);
                 return Some(self.report(phase, outcome, false));
             }

@@ -1,0 +1,175 @@
+//! `diagnose` on simulated rides with an effect hidden from the paper's model:
+//! the missing effect must come out on top, and adding it must lower the
+//! held-out error and the error against the true path and recover the hidden value.
+
+mod common;
+
+use std::sync::Arc;
+
+use gyropath::diagnosis::{Diagnosis, Folds, diagnose};
+use gyropath::model::ModelSpec;
+use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::SimulatedRide;
+
+const MINUTES: f64 = 15.0;
+
+fn settings(effects: &[&str]) -> FitSettings {
+    FitSettings {
+        model: ModelSpec {
+            effects: effects.iter().map(|s| s.to_string()).collect(),
+            ..ModelSpec::default()
+        },
+        ..FitSettings::default()
+    }
+}
+
+/// Path error against the truth (all rows, horizontal RMS) of a full fit.
+fn truth_error(sim: &SimulatedRide, sig: &Arc<Signals>, effects: &[&str]) -> f64 {
+    let mut fit = Reconstruction::new(sig.clone(), settings(effects)).expect("fit");
+    fit.finish();
+    sim.errors(sig, &fit.trajectory().p).path_all_m
+}
+
+struct Case {
+    sim: SimulatedRide,
+    sig: Arc<Signals>,
+    diagnosis: Diagnosis,
+}
+
+fn case(seed: u64, hidden: &[&str], model: &[&str]) -> Case {
+    let (sim, sig) = common::ride(seed, MINUTES * 60.0, hidden);
+    let diagnosis = diagnose(
+        sig.clone(),
+        &settings(model),
+        &Folds::default(),
+        &|_: &str| {},
+    )
+    .expect("diagnose");
+    let top: Vec<String> = diagnosis
+        .ranking
+        .iter()
+        .take(3)
+        .map(|c| {
+            format!(
+                "{} {:.3} m ({:+.1} %, t {:.1}, {})",
+                c.effect,
+                c.heldout_rms_m,
+                100.0 * c.drop,
+                c.t_statistic,
+                if c.significant { "significant" } else { "-" }
+            )
+        })
+        .collect();
+    eprintln!(
+        "seed {seed} hidden {hidden:?} model {model:?}: held-out {:.3} m; {}",
+        diagnosis.heldout_rms_m,
+        top.join("; ")
+    );
+    Case {
+        sim,
+        sig,
+        diagnosis,
+    }
+}
+
+/// The hidden effect ranks first, significant, with a clearly lower held-out
+/// error, a lower error against the truth; returns its estimate for the caller to check.
+fn found(c: &Case, effect: &str, model: &[&str]) -> std::collections::BTreeMap<String, f64> {
+    let best = &c.diagnosis.ranking[0];
+    assert_eq!(best.effect, effect, "ranking {:?}", c.diagnosis.ranking);
+    assert!(best.significant, "{best:?}");
+    assert!(best.drop > 0.05, "held-out drop {}", best.drop);
+    assert!(!best.explanation.is_empty());
+    let with: Vec<&str> = model.iter().copied().chain([effect]).collect();
+    let (before, after) = (
+        truth_error(&c.sim, &c.sig, model),
+        truth_error(&c.sim, &c.sig, &with),
+    );
+    eprintln!("  truth error {before:.3} m -> {after:.3} m");
+    assert!(after < before, "truth error {before} -> {after}");
+    best.estimate
+        .iter()
+        .map(|(k, e)| (k.clone(), e.value))
+        .collect()
+}
+
+fn within(value: f64, truth: f64, rel: f64) -> bool {
+    (value - truth).abs() <= rel * truth.abs()
+}
+
+#[test]
+fn gps_lag_is_found_and_its_lag_recovered() {
+    for seed in [41, 42] {
+        let c = case(seed, &["gps_lag"], &["paper"]);
+        let est = found(&c, "gps_lag", &["paper"]);
+        let truth = c.sim.truth.gps_lag_s.expect("lag");
+        assert!(
+            within(est["lag"], truth, 0.2),
+            "lag {} vs {truth}",
+            est["lag"]
+        );
+    }
+}
+
+#[test]
+fn gyro_scale_is_found_and_the_yaw_factor_recovered() {
+    for seed in [43, 44] {
+        let c = case(seed, &["gyro_scale"], &["paper"]);
+        let est = found(&c, "gyro_scale", &["paper"]);
+        let truth = c.sim.truth.gyro_scale.expect("scale")[2] * 100.0;
+        let z = est["scale_error_z"];
+        assert!(within(z, truth, 0.2), "z scale {z} % vs {truth} %");
+    }
+}
+
+#[test]
+fn gps_outliers_are_found() {
+    for seed in [45, 46] {
+        let c = case(seed, &["gps_outliers"], &["paper"]);
+        found(&c, "gps_outliers", &["paper"]);
+    }
+}
+
+#[test]
+fn two_hidden_effects_are_found_one_after_the_other() {
+    let c = case(47, &["gps_lag", "gyro_scale"], &["paper"]);
+    let first = c.diagnosis.ranking[0].effect.clone();
+    assert!(
+        first == "gps_lag" || first == "gyro_scale",
+        "first {first}: {:?}",
+        c.diagnosis.ranking
+    );
+    found(&c, &first, &["paper"]);
+    let second = if first == "gps_lag" {
+        "gyro_scale"
+    } else {
+        "gps_lag"
+    };
+    let c2 = case(47, &["gps_lag", "gyro_scale"], &["paper", &first]);
+    found(&c2, second, &["paper", &first]);
+}
+
+#[test]
+fn nothing_is_significant_without_a_hidden_effect() {
+    for seed in [48, 49] {
+        let c = case(seed, &[], &["paper"]);
+        for cand in &c.diagnosis.ranking {
+            assert!(!cand.significant, "{cand:?}");
+        }
+    }
+}
+
+#[test]
+fn mount_misalignment_and_temperature_bias_rank_first() {
+    // Weaker evidence than the effects above (see the README's table): the
+    // segment biases absorb much of a temperature drift and a yawed mount, so
+    // the held-out gain concentrates in a few blocks and is not always
+    // significant on a 15-minute ride. They must still rank first and help.
+    for (seed, hidden) in [(50, "mount_misalignment"), (51, "gyro_bias_channel:temp_c")] {
+        let c = case(seed, &[hidden], &["paper"]);
+        let best = &c.diagnosis.ranking[0];
+        assert_eq!(best.effect, hidden, "{:?}", c.diagnosis.ranking);
+        assert!(best.drop > 0.02, "{best:?}");
+    }
+}
