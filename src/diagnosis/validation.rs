@@ -6,7 +6,8 @@
 //! fold `b mod k`, and for each fold the model is refitted without that
 //! fold's fixes (warm-started from the full fit, LM to convergence) and then
 //! asked where the withheld fixes are. The held-out error of a fix is the
-//! horizontal distance between it and that prediction. Blocks are long
+//! distance between it and that prediction (horizontal, plus the barometric
+//! vertical residual when the log has a barometer; see [`fix_errors`]). Blocks are long
 //! compared with the GPS noise correlation, so a prediction cannot lean on
 //! neighbouring fixes of the same block; the random-walk prior holds the
 //! segment biases inside a withheld block.
@@ -86,12 +87,20 @@ impl HeldOut {
     }
 }
 
-/// Horizontal misfit (m) of every fix for parameters `theta` of `model`.
+/// Misfit (m) of every fix for parameters `theta` of `model`: the horizontal
+/// distance, and with a barometer also its vertical residual
+/// (`sqrt(h^2 + v^2)`). The barometer is precise to decimetres, so it adds
+/// little noise but shows what only moves the path vertically (a pitched
+/// sensor mount, barometer drift); GPS altitude, metres noisy, is left out.
 pub fn fix_errors(model: &Model, theta: &[f64]) -> Vec<f64> {
     let traj = model.trajectory(theta);
+    let vertical = model.observes_baro();
     super::fix_residuals(model, theta, &traj)
         .iter()
-        .map(|r| r.horizontal())
+        .map(|r| match (vertical, r.up) {
+            (true, Some(up)) => r.horizontal().hypot(up),
+            _ => r.horizontal(),
+        })
         .collect()
 }
 
