@@ -115,6 +115,14 @@ pub fn validation_settings(settings: &FitSettings) -> FitSettings {
     }
 }
 
+/// What the refit of one fold predicts.
+struct FoldResult {
+    fold: usize,
+    /// Errors of every fix (only the fold's own are held out).
+    errors: Vec<f64>,
+    iterations: usize,
+}
+
 /// Held-out errors of `model` fitted at `theta` (the full-data fit), refitting
 /// each fold in parallel.
 pub fn held_out(
@@ -127,7 +135,7 @@ pub fn held_out(
     let t0 = sig.t[0];
     let settings = &validation_settings(settings);
     let fold_of: Vec<usize> = sig.fixes.iter().map(|f| folds.fold(f.t, t0)).collect();
-    let results: Vec<Result<(usize, Vec<f64>, usize), FitError>> = (0..folds.k)
+    let results: Vec<Result<FoldResult, FitError>> = (0..folds.k)
         .into_par_iter()
         .filter(|f| fold_of.contains(f))
         .map(|f| {
@@ -135,16 +143,20 @@ pub fn held_out(
             let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
             fit.finish();
             let iterations = fit.history().len();
-            Ok((f, fix_errors(model, fit.params()), iterations))
+            Ok(FoldResult {
+                fold: f,
+                errors: fix_errors(model, fit.params()),
+                iterations,
+            })
         })
         .collect();
     let mut errors = vec![f64::NAN; sig.fixes.len()];
     let mut iterations = 0;
     for r in results {
-        let (f, errs, its) = r?;
-        iterations += its;
-        for (i, e) in errs.into_iter().enumerate() {
-            if fold_of[i] == f {
+        let r = r?;
+        iterations += r.iterations;
+        for (i, e) in r.errors.into_iter().enumerate() {
+            if fold_of[i] == r.fold {
                 errors[i] = e;
             }
         }
