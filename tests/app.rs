@@ -153,3 +153,56 @@ fn a_bad_file_shows_its_error_and_keeps_the_ride() {
     h.run_steps(2);
     assert!(h.state().error.is_none());
 }
+
+#[test]
+fn diagnose_then_add_the_suggested_effect_and_the_history_grows() {
+    let ride = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hidden-gps-lag.csv");
+    let app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::Path(ride),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| a
+            .history
+            .first()
+            .is_some_and(|r| r.heldout_rms_m.is_some())),
+        "first fit and its validation"
+    );
+    let first = h.state().history[0].clone();
+    assert_eq!(first.model.matches("gps_lag").count(), 0);
+    h.get_by_label("Diagnose").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(180), |a| a.diagnosis.is_some()),
+        "diagnosis"
+    );
+    let best = h.state().diagnosis.as_ref().expect("diagnosis").ranking[0].clone();
+    assert_eq!(best.effect, "gps_lag");
+    assert!(best.significant);
+    // The first Add button belongs to the top-ranked effect.
+    h.get_all_by_label("Add")
+        .next()
+        .expect("an Add button")
+        .click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| a.history.len() == 2
+            && a.history[1].heldout_rms_m.is_some()),
+        "refit with the effect: history {:?}, error {:?}, running {}, phase {:?}",
+        h.state().history,
+        h.state().error,
+        h.state().running,
+        h.state()
+            .snapshot
+            .as_ref()
+            .map(|s| (s.phase, s.effects.clone(), s.history.len()))
+    );
+    let second = h.state().history[1].clone();
+    assert!(second.model.contains("gps_lag"), "{second:?}");
+    let (before, after) = (
+        first.heldout_rms_m.expect("held-out"),
+        second.heldout_rms_m.expect("held-out"),
+    );
+    assert!(after < 0.9 * before, "held-out {before} -> {after}");
+    h.get_by_label(&format!("{after:.3}"));
+}

@@ -67,6 +67,10 @@ pub enum Command {
     SettingsChanged,
     PickExport(ExportKind),
     DismissError,
+    /// Rank the effects the model lacks.
+    Diagnose,
+    /// Switch an effect on and refit.
+    AddEffect(String),
 }
 
 /// One row of the model history: a finished fit of one model.
@@ -76,6 +80,8 @@ pub struct HistoryRow {
     pub segment_s: f64,
     pub params: usize,
     pub fit_rms_m: f64,
+    /// Held-out error, filled in by a background validation.
+    pub heldout_rms_m: Option<f64>,
     pub iterations: usize,
 }
 
@@ -95,6 +101,9 @@ pub struct GyropathApp {
     pub error: Option<String>,
     pub status: Option<String>,
     pub history: Vec<HistoryRow>,
+    pub diagnosis: Option<crate::diagnosis::Diagnosis>,
+    /// Progress of a running diagnosis.
+    pub diagnosing: Option<String>,
     hover_t: Option<f64>,
     picked_tx: Sender<Picked>,
     picked_rx: Receiver<Picked>,
@@ -105,7 +114,11 @@ pub struct GyropathApp {
 impl GyropathApp {
     /// Start the worker and load `ride`. `wake` is called whenever the worker
     /// has something new (pass the egui context's `request_repaint`).
-    pub fn new(settings: AppSettings, ride: RideSource, wake: impl Fn() + Send + 'static) -> Self {
+    pub fn new(
+        settings: AppSettings,
+        ride: RideSource,
+        wake: impl Fn() + Send + Sync + 'static,
+    ) -> Self {
         let worker = WorkerHandle::spawn(settings.fit.clone(), wake);
         let (picked_tx, picked_rx) = std::sync::mpsc::channel();
         let mut app = Self {
@@ -119,6 +132,8 @@ impl GyropathApp {
             error: None,
             status: None,
             history: Vec::new(),
+            diagnosis: None,
+            diagnosing: None,
             hover_t: None,
             picked_tx,
             picked_rx,
@@ -143,6 +158,7 @@ impl GyropathApp {
                     self.ride = Some(*view);
                     self.snapshot = None;
                     self.history.clear();
+                    self.diagnosis = None;
                     if std::mem::take(&mut self.run_on_load) {
                         self.worker.send(Request::Run);
                     }
@@ -157,8 +173,40 @@ impl GyropathApp {
                     self.snapshot = Some(*s);
                 }
                 Update::Running(r) => self.running = r,
-                Update::Error(e) => self.error = Some(e),
+                Update::Error(e) => {
+                    if e.starts_with("diagnosis failed") {
+                        self.diagnosing = None;
+                    }
+                    self.error = Some(e);
+                }
                 Update::Exported(p) => self.status = Some(format!("wrote {p}")),
+                Update::DiagnosisProgress(p) => self.diagnosing = Some(p),
+                Update::Diagnosis(d) => {
+                    self.diagnosing = None;
+                    if let Some(row) = self
+                        .history
+                        .iter_mut()
+                        .rev()
+                        .find(|r| r.model == d.model.join(", "))
+                    {
+                        row.heldout_rms_m = Some(d.heldout_rms_m);
+                    }
+                    self.diagnosis = Some(*d);
+                }
+                Update::HeldOut {
+                    model,
+                    params,
+                    rms_m,
+                } => {
+                    if let Some(row) = self
+                        .history
+                        .iter_mut()
+                        .rev()
+                        .find(|r| r.model == model && r.params == params)
+                    {
+                        row.heldout_rms_m.get_or_insert(rms_m);
+                    }
+                }
             }
         }
         while let Ok(p) = self.picked_rx.try_recv() {
@@ -179,6 +227,7 @@ impl GyropathApp {
             segment_s: self.settings.fit.model.segment_s,
             params: s.n_params,
             fit_rms_m: s.stats.rms_horizontal_m,
+            heldout_rms_m: None,
             iterations: s.history.len(),
         };
         let same = self.history.last().is_some_and(|r| {
@@ -233,6 +282,16 @@ impl GyropathApp {
                     .send(Request::Settings(self.settings.fit.clone()));
             }
             Command::DismissError => self.error = None,
+            Command::Diagnose => {
+                self.diagnosing = Some("starting".into());
+                self.worker.send(Request::Diagnose);
+            }
+            Command::AddEffect(id) => {
+                set_effect(&mut self.settings.fit.model.effects, &id, true);
+                self.worker
+                    .send(Request::Settings(self.settings.fit.clone()));
+                self.worker.send(Request::Run);
+            }
         }
     }
 
@@ -268,13 +327,18 @@ impl GyropathApp {
             });
         egui::Panel::bottom("history")
             .resizable(true)
-            .default_size(130.0)
-            .show(ui, |ui| self.history_ui(ui));
+            .default_size(190.0)
+            .show(ui, |ui| {
+                ui.columns(2, |cols| {
+                    self.history_ui(&mut cols[0]);
+                    self.diagnosis_ui(&mut cols[1], &mut commands);
+                });
+            });
         egui::CentralPanel::default().show(ui, |ui| self.plots_ui(ui));
         for c in commands {
             self.apply(c);
         }
-        if self.running || self.loading.is_some() {
+        if self.running || self.loading.is_some() || self.diagnosing.is_some() {
             ui.ctx()
                 .request_repaint_after(std::time::Duration::from_millis(100));
         }
@@ -560,6 +624,101 @@ impl GyropathApp {
         });
     }
 
+    fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
+        ui.horizontal(|ui| {
+            ui.heading("Diagnosis");
+            let idle = self.diagnosing.is_none() && self.snapshot.is_some();
+            if ui
+                .add_enabled(idle, egui::Button::new("Diagnose"))
+                .on_hover_text(
+                    "rank the effects the model lacks by how much each lowers the held-out error",
+                )
+                .clicked()
+            {
+                commands.push(Command::Diagnose);
+            }
+            if let Some(p) = &self.diagnosing {
+                ui.spinner();
+                ui.label(p);
+            }
+        });
+        let Some(d) = &self.diagnosis else {
+            ui.label("Diagnose ranks every effect the model lacks by the held-out error it saves.");
+            return;
+        };
+        ui.label(format!(
+            "{}: fit {:.3} m, held-out {:.3} m",
+            short_model(&d.model.join(", ")),
+            d.fit_rms_m,
+            d.heldout_rms_m
+        ));
+        let current = self.snapshot.as_ref().map(|s| s.effects.clone());
+        let stale = current.as_ref().is_some_and(|c| *c != d.model);
+        if stale {
+            ui.label("(for an earlier model: diagnose again)");
+        }
+        egui::ScrollArea::vertical()
+            .id_salt("diagnosis-scroll")
+            .show(ui, |ui| {
+                egui::Grid::new("ranking")
+                    .num_columns(5)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        for h in ["", "effect", "held-out (m)", "drop", "estimate"] {
+                            ui.strong(h);
+                        }
+                        ui.end_row();
+                        for c in &d.ranking {
+                            let present = current.as_ref().is_some_and(|m| m.contains(&c.effect));
+                            if ui
+                                .add_enabled(
+                                    !present && c.error.is_none(),
+                                    egui::Button::new("Add"),
+                                )
+                                .on_hover_text(format!("add {} and refit", c.effect))
+                                .clicked()
+                            {
+                                commands.push(Command::AddEffect(c.effect.clone()));
+                            }
+                            let label = if c.significant {
+                                egui::RichText::new(&c.effect)
+                                    .strong()
+                                    .color(egui::Color32::from_rgb(120, 220, 120))
+                            } else {
+                                egui::RichText::new(&c.effect)
+                            };
+                            ui.label(label).on_hover_text(&c.explanation);
+                            if let Some(e) = &c.error {
+                                ui.label("-");
+                                ui.label("-");
+                                ui.label(e);
+                            } else {
+                                ui.label(format!("{:.3}", c.heldout_rms_m));
+                                ui.label(format!(
+                                    "{:+.1} %{}",
+                                    100.0 * c.drop,
+                                    if c.significant { " significant" } else { "" }
+                                ));
+                                let est: Vec<String> = c
+                                    .estimate
+                                    .iter()
+                                    .map(|(k, e)| format!("{k} {:.3}±{:.3}", e.value, e.sigma))
+                                    .collect();
+                                ui.label(est.join(", ")).on_hover_text(&c.explanation);
+                            }
+                            ui.end_row();
+                        }
+                    });
+                if let Some(best) = d.ranking.first().filter(|c| c.significant) {
+                    ui.label(format!("Missing: {}: {}", best.effect, best.explanation));
+                } else {
+                    ui.label(
+                        "Nothing significant: no effect lowers the held-out error beyond chance.",
+                    );
+                }
+            });
+    }
+
     fn plots_ui(&mut self, ui: &mut egui::Ui) {
         let Some(ride) = &self.ride else {
             ui.centered_and_justified(|ui| {
@@ -614,6 +773,24 @@ fn spawn_dialog(f: impl FnOnce() + Send + 'static) {
     let _ = std::thread::Builder::new()
         .name("file-dialog".into())
         .spawn(f);
+}
+
+/// The model's effect list with the paper's five said once.
+fn short_model(model: &str) -> String {
+    let ids: Vec<&str> = model.split(", ").collect();
+    if effects::PAPER.iter().all(|p| ids.contains(p)) {
+        let extra: Vec<&str> = ids
+            .into_iter()
+            .filter(|i| !effects::PAPER.contains(i) && *i != "baro_offset")
+            .collect();
+        if extra.is_empty() {
+            "paper".to_string()
+        } else {
+            format!("paper + {}", extra.join(" + "))
+        }
+    } else {
+        model.to_string()
+    }
 }
 
 fn effects_contains(list: &[String], id: &str) -> bool {

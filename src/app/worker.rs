@@ -11,7 +11,10 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::time::{Duration, Instant};
 
-use crate::diagnosis::{FixResidual, ResidualRms, SegmentBias, fix_residuals, segment_biases};
+use crate::diagnosis::{
+    Diagnosis, FixResidual, Folds, ResidualRms, SegmentBias, diagnose_fitted, fix_residuals,
+    held_out, segment_biases,
+};
 use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
 use crate::loading;
 use crate::model::Model;
@@ -62,6 +65,8 @@ pub enum Request {
     Reset,
     Settings(FitSettings),
     Export(ExportKind, PathBuf),
+    /// Rank the effects the current model lacks (runs beside the fit).
+    Diagnose,
     Shutdown,
 }
 
@@ -110,6 +115,14 @@ pub enum Update {
     /// A setting was refused or an export failed.
     Error(String),
     Exported(String),
+    DiagnosisProgress(String),
+    Diagnosis(Box<Diagnosis>),
+    /// Held-out error of a finished fit, for the model history.
+    HeldOut {
+        model: String,
+        params: usize,
+        rms_m: f64,
+    },
 }
 
 /// The UI's handle on the worker.
@@ -121,7 +134,7 @@ pub struct WorkerHandle {
 impl WorkerHandle {
     /// Start the worker; `wake` is called after every update it sends (the UI's
     /// `request_repaint`).
-    pub fn spawn(settings: FitSettings, wake: impl Fn() + Send + 'static) -> Self {
+    pub fn spawn(settings: FitSettings, wake: impl Fn() + Send + Sync + 'static) -> Self {
         let (tx, worker_rx) = std::sync::mpsc::channel();
         let (worker_tx, rx) = std::sync::mpsc::channel();
         let spawned = std::thread::Builder::new()
@@ -132,7 +145,7 @@ impl WorkerHandle {
                     ride: None,
                     running: false,
                     tx: worker_tx,
-                    wake: Box::new(wake),
+                    wake: Arc::new(wake),
                 }
                 .run(worker_rx)
             });
@@ -170,7 +183,7 @@ struct Worker {
     ride: Option<LoadedRide>,
     running: bool,
     tx: Sender<Update>,
-    wake: Box<dyn Fn() + Send>,
+    wake: Arc<dyn Fn() + Send + Sync>,
 }
 
 impl Worker {
@@ -218,6 +231,7 @@ impl Worker {
             if done {
                 self.running = false;
                 self.send(Update::Running(false));
+                self.validate_in_background();
             }
         }
     }
@@ -256,6 +270,7 @@ impl Worker {
             }
             Request::Settings(settings) => self.apply_settings(settings),
             Request::Export(kind, path) => self.export(kind, &path),
+            Request::Diagnose => self.diagnose_in_background(),
             Request::Shutdown => {}
         }
     }
@@ -325,6 +340,69 @@ impl Worker {
                 self.send(Update::Error(e));
             }
         }
+    }
+
+    /// A copy of the current fit's model and parameters for a background job
+    /// (the fit itself stays with this thread and can go on).
+    fn detached(&self) -> Option<(Model, Vec<f64>, FitSettings)> {
+        let fit = self.fit()?;
+        let m = fit.model();
+        let model = Model::with_start(m.signals.clone(), m.spec.clone(), m.start.clone()).ok()?;
+        Some((model, fit.params().to_vec(), fit.settings().clone()))
+    }
+
+    /// Held-out error of the finished fit, for the model history.
+    fn validate_in_background(&self) {
+        let Some((model, theta, settings)) = self.detached() else {
+            return;
+        };
+        let tx = self.tx.clone();
+        let wake = self.wake_handle();
+        std::thread::spawn(move || {
+            let Ok(ho) = held_out(&model, &theta, &settings, &Folds::default()) else {
+                return;
+            };
+            let all = vec![true; ho.errors.len()];
+            let _ = tx.send(Update::HeldOut {
+                model: model.effect_ids().join(", "),
+                params: model.n_params(),
+                rms_m: ho.rms(&all),
+            });
+            wake();
+        });
+    }
+
+    fn diagnose_in_background(&self) {
+        let Some((model, theta, settings)) = self.detached() else {
+            self.send(Update::Error(
+                "nothing to diagnose: no ride is fitted".into(),
+            ));
+            return;
+        };
+        let tx = self.tx.clone();
+        let wake = self.wake_handle();
+        self.send(Update::DiagnosisProgress("starting".into()));
+        std::thread::spawn(move || {
+            let progress_tx = std::sync::Mutex::new(tx.clone());
+            let progress_wake = wake.clone();
+            let progress = move |msg: &str| {
+                if let Ok(t) = progress_tx.lock() {
+                    let _ = t.send(Update::DiagnosisProgress(msg.to_string()));
+                }
+                progress_wake();
+            };
+            let update =
+                match diagnose_fitted(&model, &theta, &settings, &Folds::default(), &progress) {
+                    Ok(d) => Update::Diagnosis(Box::new(d)),
+                    Err(e) => Update::Error(format!("diagnosis failed: {e}")),
+                };
+            let _ = tx.send(update);
+            wake();
+        });
+    }
+
+    fn wake_handle(&self) -> Arc<dyn Fn() + Send + Sync> {
+        self.wake.clone()
     }
 
     fn send_snapshot(&self) {
