@@ -327,7 +327,8 @@ impl GyropathApp {
             });
         egui::Panel::bottom("history")
             .resizable(true)
-            .default_size(190.0)
+            .min_size(180.0)
+            .default_size(200.0)
             .show(ui, |ui| {
                 ui.columns(2, |cols| {
                     self.history_ui(&mut cols[0]);
@@ -597,31 +598,38 @@ impl GyropathApp {
             );
             return;
         }
-        egui::ScrollArea::vertical().show(ui, |ui| {
-            egui::Grid::new("history")
-                .num_columns(5)
-                .striped(true)
-                .show(ui, |ui| {
-                    for h in [
-                        "model",
-                        "segment (s)",
-                        "parameters",
-                        "iterations",
-                        "fit RMS (m)",
-                    ] {
-                        ui.strong(h);
-                    }
-                    ui.end_row();
-                    for row in &self.history {
-                        ui.label(&row.model);
-                        ui.label(format!("{:.1}", row.segment_s));
-                        ui.label(format!("{}", row.params));
-                        ui.label(format!("{}", row.iterations));
-                        ui.label(format!("{:.3}", row.fit_rms_m));
+        egui::ScrollArea::vertical()
+            .id_salt("history-scroll")
+            .show(ui, |ui| {
+                egui::Grid::new("history")
+                    .num_columns(6)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        for h in [
+                            "model",
+                            "segment",
+                            "params",
+                            "iters",
+                            "fit RMS",
+                            "held-out RMS",
+                        ] {
+                            ui.strong(h);
+                        }
                         ui.end_row();
-                    }
-                });
-        });
+                        for row in &self.history {
+                            ui.label(short_model(&row.model)).on_hover_text(&row.model);
+                            ui.label(format!("{:.1} s", row.segment_s));
+                            ui.label(format!("{}", row.params));
+                            ui.label(format!("{}", row.iterations));
+                            ui.label(format!("{:.3} m", row.fit_rms_m));
+                            match row.heldout_rms_m {
+                                Some(h) => ui.label(format!("{h:.3} m")),
+                                None => ui.label("validating..."),
+                            };
+                            ui.end_row();
+                        }
+                    });
+            });
     }
 
     fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
@@ -746,7 +754,7 @@ impl GyropathApp {
                     return;
                 };
                 let h = ((avail.y - 3.0 * 24.0) / 3.0).max(60.0);
-                ui.label("Cost per iteration (log scale)");
+                ui.label("Cost per iteration (log scale; step 1 grows its window)");
                 plots::cost_ui(ui, snap, h);
                 ui.label("Gyro bias per segment");
                 hover = hover.or(plots::bias_ui(ui, ride, snap, h).0);

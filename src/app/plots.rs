@@ -167,6 +167,13 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
                 .map(|r| [r.iteration as f64, r.cost.log10()])
                 .collect();
             plot.line(Line::new("cost", pts).color(PATH).width(2.0));
+            let rms: PlotPoints = snap
+                .history
+                .iter()
+                .filter(|r| r.rms_horizontal_m > 0.0 && r.rms_horizontal_m.is_finite())
+                .map(|r| [r.iteration as f64, r.rms_horizontal_m.log10()])
+                .collect();
+            plot.line(Line::new("GPS RMS (m), whole ride", rms).color(GPS).width(1.5));
             for r in &snap.history {
                 if r.settings_changed {
                     plot.vline(
@@ -219,16 +226,25 @@ pub fn residuals_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height:
     let t0 = ride.t0;
     let r = time_plot("residuals", height, "fix - path (m)").show(ui, |plot| {
         let res = &snap.residuals;
-        let along: PlotPoints = res.iter().map(|r| [r.t - t0, r.along]).collect();
-        let cross: PlotPoints = res.iter().map(|r| [r.t - t0, r.cross]).collect();
-        plot.line(Line::new("along-track", along).color(AXES[0]));
-        plot.line(Line::new("cross-track", cross).color(AXES[1]));
-        if res.iter().any(|r| r.up.is_some()) {
-            let up: PlotPoints = res
+        // One line per stretch of consecutive fixes, so outages stay gaps.
+        let mut start = 0;
+        while start < res.len() {
+            let end = (start + 1..res.len())
+                .find(|&k| res[k].t - res[k - 1].t > 2.5)
+                .unwrap_or(res.len());
+            let run = &res[start..end];
+            let along: PlotPoints = run.iter().map(|r| [r.t - t0, r.along]).collect();
+            let cross: PlotPoints = run.iter().map(|r| [r.t - t0, r.cross]).collect();
+            plot.line(Line::new("along-track", along).color(AXES[0]));
+            plot.line(Line::new("cross-track", cross).color(AXES[1]));
+            let up: Vec<[f64; 2]> = run
                 .iter()
                 .filter_map(|r| r.up.map(|u| [r.t - t0, u]))
                 .collect();
-            plot.line(Line::new("vertical", up).color(AXES[2]));
+            if !up.is_empty() {
+                plot.line(Line::new("vertical", up).color(AXES[2]));
+            }
+            start = end;
         }
         for &(a, b) in &ride.outages {
             plot.vline(VLine::new("GPS outage", a - t0).color(OUTAGE));
