@@ -70,7 +70,7 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .rms_horizontal_m;
     assert!(rms < 3.0, "GPS RMS {rms}");
     // The model history has one row with the fit RMS in it.
-    h.get_by_label(&format!("{rms:.3}"));
+    h.get_by_label(&format!("{rms:.3} m"));
 }
 
 #[test]
@@ -204,5 +204,5 @@ fn diagnose_then_add_the_suggested_effect_and_the_history_grows() {
         second.heldout_rms_m.expect("held-out"),
     );
     assert!(after < 0.9 * before, "held-out {before} -> {after}");
-    h.get_by_label(&format!("{after:.3}"));
+    h.get_by_label(&format!("{after:.3} m"));
 }
