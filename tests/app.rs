@@ -69,8 +69,8 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .stats
         .rms_horizontal_m;
     assert!(rms < 3.0, "GPS RMS {rms}");
-    // The model history has one row with the fit RMS in it.
-    h.get_by_label(&format!("{rms:.3} m"));
+    // The fit panel and the model history's row both show the fit RMS.
+    assert_eq!(h.get_all_by_label(&format!("{rms:.3} m")).count(), 2);
 }
 
 #[test]
