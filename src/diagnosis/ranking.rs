@@ -106,6 +106,7 @@ pub fn diagnose_fitted(
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, FitError> {
     let sig = &model.signals;
+    let folds = &folds.for_ride(sig.duration());
     progress("held-out validation of the model");
     let base = held_out(model, theta, settings, folds)?;
     let fit_errors = fix_errors(model, theta);

@@ -44,6 +44,18 @@ impl Folds {
     pub fn fold(&self, t: f64, t0: f64) -> usize {
         self.block(t, t0) % self.k
     }
+
+    /// These folds for a ride of `duration_s`: blocks shortened so that every
+    /// fold gets at least two blocks (a one-minute drive is still validated,
+    /// over 6 s blocks), but not below 5 s.
+    pub fn for_ride(&self, duration_s: f64) -> Folds {
+        let k = self.k.max(2);
+        let fit = duration_s / (2 * k) as f64;
+        Folds {
+            block_s: self.block_s.min(fit).max(5.0),
+            k,
+        }
+    }
 }
 
 /// Held-out errors of every fix.
@@ -134,6 +146,7 @@ pub fn held_out(
     let sig = &model.signals;
     let t0 = sig.t[0];
     let settings = &validation_settings(settings);
+    let folds = &folds.for_ride(sig.duration());
     let fold_of: Vec<usize> = sig.fixes.iter().map(|f| folds.fold(f.t, t0)).collect();
     let results: Vec<Result<FoldResult, FitError>> = (0..folds.k)
         .into_par_iter()
