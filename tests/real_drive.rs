@@ -68,7 +68,10 @@ fn paper_model_recovers_the_yaw_bias_and_beats_the_raw_fixes() {
     );
     // comma's own calibration says -3.917 deg/s; a constant-bias fit to the GPS course -3.885.
     assert!((yaw_bias + 3.9).abs() < 0.1, "yaw bias {yaw_bias} deg/s");
-    assert!((1.2..1.9).contains(&fixes), "fixes {fixes} m from the reference");
+    assert!(
+        (1.2..1.9).contains(&fixes),
+        "fixes {fixes} m from the reference"
+    );
     assert!(at_fixes < fixes, "path {at_fixes} m vs fixes {fixes} m");
     assert!(everywhere < fixes, "path {everywhere} m vs fixes {fixes} m");
 
@@ -84,7 +87,10 @@ fn paper_model_recovers_the_yaw_bias_and_beats_the_raw_fixes() {
     let with_lag = horizontal_rms(path.iter().copied().zip(truth.iter().copied()));
     eprintln!("with gps_lag: lag {lag:.3} s, path {with_lag:.3} m from the reference");
     assert!((0.03..0.15).contains(&lag), "lag {lag} s");
-    assert!(with_lag < 0.6 * everywhere, "{with_lag} m vs {everywhere} m");
+    assert!(
+        with_lag < 0.6 * everywhere,
+        "{with_lag} m vs {everywhere} m"
+    );
 }
 
 #[test]
@@ -98,9 +104,18 @@ fn diagnose_runs_on_a_one_minute_drive_and_points_at_the_gps_latency() {
         &|_: &str| {},
     )
     .expect("diagnose");
-    assert!(d.folds.block_s < 10.0, "blocks fitted to the minute: {:?}", d.folds);
+    assert!(
+        d.folds.block_s < 10.0,
+        "blocks fitted to the minute: {:?}",
+        d.folds
+    );
     let best = &d.ranking[0];
-    eprintln!("{}: {:+.1} % ({})", best.effect, 100.0 * best.drop, best.explanation);
+    eprintln!(
+        "{}: {:+.1} % ({})",
+        best.effect,
+        100.0 * best.drop,
+        best.explanation
+    );
     assert_eq!(best.effect, "gps_lag");
     assert!(best.drop > 0.1);
 }

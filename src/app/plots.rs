@@ -173,7 +173,11 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
                 .filter(|r| r.rms_horizontal_m > 0.0 && r.rms_horizontal_m.is_finite())
                 .map(|r| [r.iteration as f64, r.rms_horizontal_m.log10()])
                 .collect();
-            plot.line(Line::new("GPS RMS (m), whole ride", rms).color(GPS).width(1.5));
+            plot.line(
+                Line::new("GPS RMS (m), whole ride", rms)
+                    .color(GPS)
+                    .width(1.5),
+            );
             for r in &snap.history {
                 if r.settings_changed {
                     plot.vline(
