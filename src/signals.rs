@@ -112,11 +112,31 @@ impl Signals {
         for j in 1..n {
             dt[j] = t[j] - t[j - 1];
         }
-        let gyro: Vec<Vector3<f64>> = log
+        let raw: Vec<Vector3<f64>> = log
             .gyro_dps
             .iter()
             .map(|g| Vector3::new(g[0], g[1], g[2]) * std::f64::consts::PI / 180.0)
             .collect();
+        let instantaneous = match log.metadata.get("gyro_samples").map(|v| v.trim()) {
+            None | Some("mean") => false,
+            Some("instantaneous") => true,
+            Some(other) => {
+                return Err(unusable(format!(
+                    "metadata gyro_samples: '{other}' is neither 'mean' nor 'instantaneous'"
+                )));
+            }
+        };
+        let (gyro, gaps) = step_rates(&raw, &dt, instantaneous);
+        let mut warnings = log.warnings.clone();
+        if let Some(g) = gaps.longest {
+            warnings.push(format!(
+                "{file}: {} gap(s) in the log longer than {:.3} s (5 sample intervals), the longest {:.2} s at t = {:.2} s; the rotation across each is interpolated between the samples either side",
+                gaps.count,
+                gaps.limit_s,
+                g.1,
+                t[g.0],
+            ));
+        }
 
         let (distance, odometer) = if let Some(odo) = &log.odo_m {
             (distance_from_odometer(odo, log)?, Odometer::Cumulative)
@@ -201,7 +221,7 @@ impl Signals {
             has_gps_alt,
             channels,
             odometer,
-            warnings: log.warnings.clone(),
+            warnings,
         })
     }
 
@@ -267,6 +287,54 @@ pub fn fill_gaps(v: &[Option<f64>]) -> Vec<f64> {
         *o = value(last);
     }
     out
+}
+
+/// Gaps found in the sample times.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Gaps {
+    pub count: usize,
+    /// A step longer than this is a gap (s): 5 median sample intervals.
+    pub limit_s: f64,
+    /// Row ending the longest gap and its length (s).
+    pub longest: Option<(usize, f64)>,
+}
+
+/// The rate to integrate over each step `(t_{j-1}, t_j]`.
+///
+/// The format says a row holds the mean rate over its step; loggers that
+/// store instantaneous samples instead (`# gyro_samples: instantaneous`) get
+/// the trapezoid mean `(omega_{j-1} + omega_j) / 2`, which is exact for a
+/// rate linear over the step. A gap (a step longer than five median sample
+/// intervals: dropped samples) is never integrated with the one sample after
+/// it held over the whole gap: the trapezoid between the samples either side
+/// is used there whatever the sample kind.
+pub fn step_rates(
+    raw: &[Vector3<f64>],
+    dt: &[f64],
+    instantaneous: bool,
+) -> (Vec<Vector3<f64>>, Gaps) {
+    let mut sorted: Vec<f64> = dt.iter().skip(1).copied().collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let limit = 5.0 * median;
+    let mut gaps = Gaps {
+        limit_s: limit,
+        ..Gaps::default()
+    };
+    let mut out = raw.to_vec();
+    for j in 1..raw.len() {
+        let gap = dt[j] > limit;
+        if gap {
+            gaps.count += 1;
+            if gaps.longest.is_none_or(|(_, l)| dt[j] > l) {
+                gaps.longest = Some((j, dt[j]));
+            }
+        }
+        if gap || instantaneous {
+            out[j] = (raw[j - 1] + raw[j]) * 0.5;
+        }
+    }
+    (out, gaps)
 }
 
 /// A gap between wheel revolutions longer than this (s) is taken as a stop.
@@ -374,5 +442,66 @@ mod tests {
     fn gaps_are_interpolated() {
         let v = [None, Some(1.0), None, Some(3.0), None];
         assert_eq!(fill_gaps(&v), vec![1.0, 1.0, 2.0, 3.0, 3.0]);
+    }
+}
+
+#[cfg(test)]
+mod rate_tests {
+    use super::*;
+
+    #[test]
+    fn gaps_and_instantaneous_samples_use_the_trapezoid() {
+        let raw: Vec<Vector3<f64>> = (0..8).map(|k| Vector3::new(0.0, 0.0, k as f64)).collect();
+        let mut dt = vec![0.01; 8];
+        dt[0] = 0.0;
+        dt[5] = 0.5; // 49 dropped samples
+        let (mean, gaps) = step_rates(&raw, &dt, false);
+        assert_eq!(gaps.count, 1);
+        assert_eq!(gaps.longest, Some((5, 0.5)));
+        assert!((gaps.limit_s - 0.05).abs() < 1e-12);
+        assert_eq!(mean[4].z, 4.0);
+        assert_eq!(mean[5].z, 4.5);
+        let (inst, _) = step_rates(&raw, &dt, true);
+        assert_eq!(inst[4].z, 3.5);
+        assert_eq!(inst[0].z, 0.0);
+    }
+
+    #[test]
+    fn a_log_with_a_gap_warns_and_an_unknown_sample_kind_is_refused() {
+        let mut log = crate::testing::winding_log(30.0, 100.0);
+        let cut = 1000..1100;
+        for v in [&mut log.t_s] {
+            v.drain(cut.clone());
+        }
+        log.line.drain(cut.clone());
+        log.gyro_dps.drain(cut.clone());
+        log.fix.drain(cut.clone());
+        if let Some(p) = log.wheel_pulse.as_mut() {
+            p.drain(cut.clone());
+        }
+        if let Some(o) = log.odo_m.as_mut() {
+            o.drain(cut.clone());
+        }
+        if let Some(a) = log.gps_alt_m.as_mut() {
+            a.drain(cut.clone());
+        }
+        if let Some(b) = log.baro_alt_m.as_mut() {
+            b.drain(cut.clone());
+        }
+        for (_, c) in log.channels.iter_mut() {
+            c.drain(cut.clone());
+        }
+        let sig = Signals::from_log(&log).expect("signals");
+        assert!(
+            sig.warnings
+                .iter()
+                .any(|w| w.contains("gap") && w.contains("1.01 s")),
+            "{:?}",
+            sig.warnings
+        );
+        log.metadata
+            .insert("gyro_samples".into(), "sometimes".into());
+        let err = Signals::from_log(&log).expect_err("bad metadata");
+        assert!(err.to_string().contains("gyro_samples"), "{err}");
     }
 }

@@ -147,3 +147,41 @@ fn an_hour_long_ride_converges_to_the_gps() {
     assert!(stats.rms_horizontal_m < 2.5, "{stats:?}");
     assert!(e.path_at_fixes_m < e.fixes_m, "{e:?}");
 }
+
+#[test]
+fn the_same_ride_logged_at_10_100_and_1000_hz_gives_the_same_path() {
+    let mut errors = Vec::new();
+    for rate in [10.0, 100.0, 1000.0] {
+        let sim = gyropath::simulation::simulate(&gyropath::simulation::SimConfig {
+            seed: 9,
+            duration_s: 300.0,
+            rate_hz: rate,
+            ..Default::default()
+        })
+        .unwrap();
+        let sig = std::sync::Arc::new(
+            gyropath::signals::Signals::from_log(
+                &gyropath::loading::parse(sim.log_csv.as_bytes(), "rate.csv").unwrap(),
+            )
+            .unwrap(),
+        );
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+        fit.finish();
+        let e = sim.errors(&sig, &fit.trajectory().p);
+        eprintln!(
+            "{rate} Hz: {} rows, path {:.3} m, fixes {:.3} m from the truth",
+            sig.len(),
+            e.path_at_fixes_m,
+            e.fixes_m
+        );
+        assert!(e.path_at_fixes_m < e.fixes_m, "{rate} Hz: {e:?}");
+        errors.push(e.path_at_fixes_m);
+    }
+    let reference = errors[1];
+    for e in errors {
+        assert!(
+            (e - reference).abs() < 0.5 + 0.25 * reference,
+            "{e} m vs {reference} m at 100 Hz"
+        );
+    }
+}
