@@ -59,10 +59,15 @@ pub enum IncrementArg {
 
 #[derive(Debug, Args)]
 pub struct FitArgs {
-    /// Ride log (CSV, see the ride-log format).
-    pub ride: PathBuf,
+    /// Ride log(s) (CSV, see the ride-log format), or folders of them: more
+    /// than one, a folder, or --out-dir fits them all in parallel (batch mode).
+    #[arg(required = true, num_args = 1..)]
+    pub rides: Vec<PathBuf>,
     #[command(flatten)]
     pub settings: SettingsArgs,
+    /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
     /// Write the reconstructed path here (CSV: t_s,lat_deg,lon_deg,alt_m,...).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -233,9 +238,14 @@ fn progress_line(r: &IterationReport) -> String {
 }
 
 pub fn fit(args: &FitArgs) -> Result<()> {
+    let batch = args.rides.len() > 1 || args.out_dir.is_some() || args.rides[0].is_dir();
+    if batch {
+        return fit_batch(args);
+    }
+    let ride = &args.rides[0];
     let started = Instant::now();
     let settings = args.settings.settings()?;
-    let signals = Arc::new(load_signals(&args.ride)?);
+    let signals = Arc::new(load_signals(ride)?);
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
@@ -263,18 +273,142 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
     if let Some(out) = &args.out {
         let path = fit.trajectory();
-        write_atomically(out, Some(&args.ride), |w| {
-            write_path_csv(w, fit.model(), &path)
-        })?;
+        write_atomically(out, Some(ride), |w| write_path_csv(w, fit.model(), &path))?;
     }
     if let Some(rep) = &args.report {
-        write_atomically(rep, Some(&args.ride), |w| {
+        write_atomically(rep, Some(ride), |w| {
             serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
             writeln!(w)
         })?;
     }
     if !args.quiet {
         print_summary(&report);
+    }
+    Ok(())
+}
+
+/// One line of the batch summary.
+struct BatchRow {
+    ride: String,
+    outcome: Result<FitReport, String>,
+}
+
+/// Every `.csv` in the given files and folders (folders not recursed), sorted.
+fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut rides = Vec::new();
+    for input in inputs {
+        if input.is_dir() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
+                .with_context(|| format!("cannot list {}", input.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
+                .collect();
+            found.sort();
+            rides.extend(found);
+        } else {
+            rides.push(input.clone());
+        }
+    }
+    if rides.is_empty() {
+        anyhow::bail!("no ride logs (*.csv) found in the given folders");
+    }
+    Ok(rides)
+}
+
+/// Fit one ride of a batch and write its outputs into `out_dir`.
+fn fit_one(ride: &Path, settings: &FitSettings, out_dir: &Path) -> Result<FitReport> {
+    let started = Instant::now();
+    let signals = Arc::new(load_signals(ride)?);
+    let mut fit = Reconstruction::new(signals, settings.clone())?;
+    fit.finish();
+    let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
+    let stem = ride
+        .file_stem()
+        .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned());
+    let path = fit.trajectory();
+    write_atomically(&out_dir.join(format!("{stem}-path.csv")), Some(ride), |w| {
+        write_path_csv(w, fit.model(), &path)
+    })?;
+    write_atomically(
+        &out_dir.join(format!("{stem}-report.json")),
+        Some(ride),
+        |w| {
+            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
+            writeln!(w)
+        },
+    )?;
+    Ok(report)
+}
+
+/// Batch mode: every ride on all cores (one ride per task; each fit is
+/// sequential apart from the linear algebra), then a summary table. Rides that
+/// fail are reported in the table and make the exit status 1, but never stop the others.
+fn fit_batch(args: &FitArgs) -> Result<()> {
+    use rayon::prelude::*;
+    if args.out.is_some() || args.report.is_some() {
+        anyhow::bail!("with several rides use --out-dir instead of --out/--report");
+    }
+    let out_dir = args.out_dir.clone().unwrap_or_else(|| PathBuf::from("."));
+    std::fs::create_dir_all(&out_dir)
+        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    let settings = args.settings.settings()?;
+    let rides = collect_rides(&args.rides)?;
+    let started = Instant::now();
+    let rows: Vec<BatchRow> = rides
+        .par_iter()
+        .map(|ride| {
+            let outcome = fit_one(ride, &settings, &out_dir).map_err(|e| format!("{e:#}"));
+            if !args.quiet {
+                eprintln!(
+                    "{} {}",
+                    if outcome.is_ok() { "fitted" } else { "FAILED" },
+                    ride.display()
+                );
+            }
+            BatchRow {
+                ride: ride.display().to_string(),
+                outcome,
+            }
+        })
+        .collect();
+    println!(
+        "{:<40} {:>8} {:>6} {:>9} {:>9} {:>9} {:>8}",
+        "ride", "min", "fixes", "fit RMS", "vert RMS", "yaw bias", "gain"
+    );
+    let mut failed = 0;
+    for row in &rows {
+        match &row.outcome {
+            Ok(r) => {
+                let value = |e: &str, n: &str| r.value(e, n).unwrap_or(f64::NAN);
+                let vertical = r.stats.rms_baro_up_m.or(r.stats.rms_gps_up_m);
+                println!(
+                    "{:<40} {:>8.1} {:>6} {:>7.3} m {:>9} {:>5.3}°/s {:>8.4}",
+                    row.ride,
+                    r.duration_s / 60.0,
+                    r.gps_fixes,
+                    r.stats.rms_horizontal_m,
+                    vertical.map_or("-".into(), |v| format!("{v:.3} m")),
+                    value("gyro_bias", "bias_z"),
+                    value("odometer_gain", "gain"),
+                );
+            }
+            Err(e) => {
+                failed += 1;
+                println!("{:<40} failed: {e}", row.ride);
+            }
+        }
+    }
+    println!(
+        "{} rides, {} fitted, {} failed, {:.1} s on {} threads; outputs in {}",
+        rows.len(),
+        rows.len() - failed,
+        failed,
+        started.elapsed().as_secs_f64(),
+        rayon::current_num_threads(),
+        out_dir.display()
+    );
+    if failed > 0 {
+        anyhow::bail!("{failed} of {} rides could not be fitted", rows.len());
     }
     Ok(())
 }

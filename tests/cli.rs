@@ -214,3 +214,50 @@ fn diagnose_refuses_bad_fold_settings() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--folds"));
 }
+
+#[test]
+fn batch_mode_fits_a_folder_and_reports_every_ride() {
+    let dir = tempfile::tempdir().unwrap();
+    let rides = dir.path().join("rides");
+    std::fs::create_dir(&rides).unwrap();
+    for seed in ["21", "22"] {
+        let out = gyropath(&[
+            "simulate",
+            "--seed",
+            seed,
+            "--duration",
+            "200",
+            "--out",
+            s(&rides.join(format!("ride{seed}.csv"))),
+        ]);
+        assert!(out.status.success());
+    }
+    std::fs::write(rides.join("broken.csv"), "t_s,gx_dps\n0,1\n").unwrap();
+    let out_dir = dir.path().join("out");
+    let out = gyropath(&["fit", s(&rides), "--out-dir", s(&out_dir), "--quiet"]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{table}");
+    assert!(
+        table.contains("ride21.csv") && table.contains("ride22.csv"),
+        "{table}"
+    );
+    assert!(
+        table.contains("broken.csv") && table.contains("failed"),
+        "{table}"
+    );
+    assert!(table.contains("3 rides, 2 fitted, 1 failed"), "{table}");
+    for stem in ["ride21", "ride22"] {
+        assert!(out_dir.join(format!("{stem}-path.csv")).exists());
+        assert!(out_dir.join(format!("{stem}-report.json")).exists());
+    }
+    // Several rides with --out is refused.
+    let out = gyropath(&[
+        "fit",
+        s(&rides.join("ride21.csv")),
+        s(&rides.join("ride22.csv")),
+        "--out",
+        "x.csv",
+    ]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--out-dir"));
+}
