@@ -22,6 +22,10 @@ pub enum StartError {
         "{file}: the GPS fixes never move more than {min_m} m between consecutive seconds, so the heading is unobservable (a ride without motion?)"
     )]
     NoMotion { file: String, min_m: f64 },
+    #[error(
+        "{file}: no two GPS fixes are within {max_gap_s} s of each other, so the heading cannot be taken from the GPS course (the fixes are too sparse)"
+    )]
+    SparseFixes { file: String, max_gap_s: f64 },
 }
 
 /// Starting point of the fit.
@@ -82,11 +86,13 @@ impl StartGuess {
         let mut samples: Vec<(f64, f64, f64)> = Vec::new();
         let mut chord_sum = 0.0;
         let mut odo_sum = 0.0;
+        let mut pairs = 0;
         for w in sig.fixes.windows(2) {
             let (a, b) = (&w[0], &w[1]);
             if b.t - a.t > MAX_FIX_GAP_S {
                 continue;
             }
+            pairs += 1;
             let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
             let chord = de.hypot(dn);
             let odo: f64 = sig.distance[a.row + 1..=b.row].iter().sum();
@@ -108,6 +114,12 @@ impl StartGuess {
             .unwrap_or(samples.len())
             .max(MIN_HEADING_SAMPLES.min(samples.len()));
         samples.truncate(enough);
+        if pairs == 0 {
+            return Err(StartError::SparseFixes {
+                file: sig.source.clone(),
+                max_gap_s: MAX_FIX_GAP_S,
+            });
+        }
         if samples.len() < 2 {
             return Err(StartError::NoMotion {
                 file: sig.source.clone(),
