@@ -109,6 +109,41 @@ pub struct GyropathApp {
     picked_rx: Receiver<Picked>,
     /// Start running when the ride being loaded arrives.
     run_on_load: bool,
+    /// Frame-time statistics on stderr (`GYROPATH_FRAME_LOG=1`), for measuring.
+    frame_log: Option<FrameLog>,
+}
+
+/// Frame times of the UI (eframe's CPU time per frame, without the GPU).
+#[derive(Default)]
+struct FrameLog {
+    times: Vec<f32>,
+}
+
+impl FrameLog {
+    fn record(&mut self, cpu: Option<f32>) {
+        let Some(t) = cpu else {
+            return;
+        };
+        self.times.push(t);
+        if self.times.len() == 200 {
+            let mut v = std::mem::take(&mut self.times);
+            v.sort_by(f32::total_cmp);
+            let rss = std::fs::read_to_string("/proc/self/status")
+                .ok()
+                .and_then(|s| {
+                    s.lines()
+                        .find(|l| l.starts_with("VmRSS:"))
+                        .map(|l| l.trim_start_matches("VmRSS:").trim().to_string())
+                })
+                .unwrap_or_default();
+            eprintln!(
+                "frames: median {:.2} ms, 95% {:.2} ms, max {:.2} ms over 200; RSS {rss}",
+                1e3 * v[100],
+                1e3 * v[190],
+                1e3 * v[199]
+            );
+        }
+    }
 }
 
 impl GyropathApp {
@@ -137,6 +172,7 @@ impl GyropathApp {
             hover_t: None,
             picked_tx,
             picked_rx,
+            frame_log: std::env::var_os("GYROPATH_FRAME_LOG").map(|_| FrameLog::default()),
         };
         app.apply(Command::Open(ride));
         app
@@ -767,8 +803,11 @@ impl GyropathApp {
 }
 
 impl eframe::App for GyropathApp {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
         GyropathApp::ui(self, ui);
+        if let Some(log) = self.frame_log.as_mut() {
+            log.record(frame.info().cpu_usage);
+        }
     }
 
     fn save(&mut self, storage: &mut dyn eframe::Storage) {
