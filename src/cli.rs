@@ -550,12 +550,12 @@ fn print_diagnosis(d: &Diagnosis) {
     println!("structure {}", strong.join(", "));
     println!();
     println!(
-        "{:<4}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",
+        "{:<5}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",
         "rank", "effect", "held-out", "drop", "t", "sig."
     );
     for (i, c) in d.ranking.iter().enumerate() {
         if let Some(e) = &c.error {
-            println!("{:<4}{:<26}  could not be fitted: {e}", i + 1, c.effect);
+            println!("{:<5}{:<26}  could not be fitted: {e}", i + 1, c.effect);
             continue;
         }
         let est: Vec<String> = c
@@ -564,7 +564,7 @@ fn print_diagnosis(d: &Diagnosis) {
             .map(|(k, e)| format!("{k} {:.3} ± {:.3} {}", e.value, e.sigma, e.unit))
             .collect();
         println!(
-            "{:<4}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}  {}",
+            "{:<5}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}  {}",
             i + 1,
             c.effect,
             c.heldout_rms_m,
