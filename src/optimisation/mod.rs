@@ -199,6 +199,9 @@ pub struct Reconstruction {
     widened: bool,
 }
 
+/// Step 1 widens its window by at most this much at a time (s).
+const MAX_WIDENING_S: f64 = 300.0;
+
 /// Step 1's first window (s); it grows by half each time the fit on it converges.
 const FIRST_WINDOW_S: f64 = 120.0;
 
@@ -335,11 +338,74 @@ impl Reconstruction {
     fn mask(&self, phase: Phase) -> Vec<bool> {
         match (phase, self.settings.method) {
             (Phase::Step1, _) if self.windows_fit_segments() => {
-                self.model.free_mask(&[Role::Global, Role::Segments])
+                let mut free = self.model.free_mask(&[Role::Global, Role::Segments]);
+                // Only the segments the window reaches: the others have no
+                // observation yet and would only make the dense solve bigger.
+                if let Some(end) = self.window_end() {
+                    for (i, _, started) in self.segment_starts() {
+                        free[i] &= started < end;
+                    }
+                }
+                free
             }
             (Phase::Step1, _) => self.model.free_mask(&[Role::Global, Role::Step1Only]),
             (_, Method::Lm) => self.model.free_mask(&[Role::Global, Role::Segments]),
             (_, Method::Gd) => self.model.free_mask(&[Role::Segments]),
+        }
+    }
+
+    /// Log time where step 1's window ends (`None`: it covers the ride).
+    fn window_end(&self) -> Option<f64> {
+        self.window
+            .as_ref()
+            .map(|(length, _)| self.model.signals.t[0] + length)
+    }
+
+    /// Every segment parameter (its index and the index of the first of its
+    /// (x, y, z) triple) with the log time of its first step.
+    fn segment_starts(&self) -> Vec<(usize, usize, f64)> {
+        let t = &self.model.signals.t;
+        let mut out = Vec::new();
+        for (e, effect) in self.model.effects().iter().enumerate() {
+            if effect.role() != Role::Segments {
+                continue;
+            }
+            let range = self.model.range(e);
+            for (k, i) in range.clone().enumerate() {
+                let first = effect.param_steps(k).map_or(0, |(f, _)| f);
+                let start = t.get(first).copied().unwrap_or(f64::INFINITY);
+                out.push((i, range.start + k - k % 3, start));
+            }
+        }
+        out
+    }
+
+    /// When the window widens: the segments it has not reached yet take the
+    /// bias of the last segment it had (the random walk's best guess), so the
+    /// newly observed stretch starts from an extrapolation, not from zero.
+    fn extrapolate_segments(&mut self, reached: f64) {
+        let starts = self.segment_starts();
+        // The mean of the last few reached segments: the very last one, at the
+        // window's edge, is the least determined.
+        let reached_triples: Vec<usize> = starts
+            .iter()
+            .filter(|(i, triple, t)| *t < reached && i == triple)
+            .map(|(_, triple, _)| *triple)
+            .collect();
+        let tail = &reached_triples[reached_triples.len().saturating_sub(3)..];
+        if tail.is_empty() {
+            return;
+        }
+        let mut value = [0.0; 3];
+        for &b in tail {
+            for a in 0..3 {
+                value[a] += self.theta[b + a] / tail.len() as f64;
+            }
+        }
+        for &(i, triple, t) in &starts {
+            if t >= reached {
+                self.theta[i] = value[i - triple];
+            }
         }
     }
 
@@ -399,7 +465,14 @@ impl Reconstruction {
         {
             // Widen the window and keep fitting step 1.
             let length = *length;
-            if let Ok(next) = self.next_window(1.5 * length) {
+            // By half, but by at most five minutes at a time: dead reckoning
+            // with a drifting bias over a longer unseen stretch can start LM
+            // in the wrong basin.
+            if let Ok(next) = self.next_window((1.5 * length).min(length + MAX_WIDENING_S)) {
+                if self.windows_fit_segments() {
+                    let reached = self.model.signals.t[0] + length;
+                    self.extrapolate_segments(reached);
+                }
                 self.window = next;
                 self.widened = true;
                 self.lm = LmState::new(self.settings.damping);
