@@ -206,3 +206,36 @@ fn diagnose_then_add_the_suggested_effect_and_the_history_grows() {
     assert!(after < 0.9 * before, "held-out {before} -> {after}");
     h.get_by_label(&format!("{after:.3} m"));
 }
+
+/// A file dropped on the window, as the windowing layer hands it to egui.
+#[derive(Debug)]
+struct Dropped(std::path::PathBuf);
+
+impl egui::DroppedFile for Dropped {
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+
+    fn bytes(&self) -> Result<Vec<u8>, String> {
+        std::fs::read(&self.0).map_err(|e| e.to_string())
+    }
+}
+
+#[test]
+fn dropping_a_ride_on_the_window_loads_it_and_remembers_it() {
+    let ride = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hidden-gyro-scale.csv");
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    h.input_mut()
+        .dropped_files
+        .push(std::sync::Arc::new(Dropped(ride.clone())));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains("hidden-gyro-scale"))));
+    assert_eq!(h.state().settings.recent.first(), Some(&ride));
+    h.get_by_label_contains("hidden-gyro-scale.csv");
+}

@@ -117,13 +117,21 @@ pub struct GyropathApp {
 #[derive(Default)]
 struct FrameLog {
     times: Vec<f32>,
+    /// Frames seen; the first [`FrameLog::WARM_UP`] (font atlas, first layout) are not counted.
+    seen: usize,
 }
 
 impl FrameLog {
+    const WARM_UP: usize = 30;
+
     fn record(&mut self, cpu: Option<f32>) {
         let Some(t) = cpu else {
             return;
         };
+        self.seen += 1;
+        if self.seen <= Self::WARM_UP {
+            return;
+        }
         self.times.push(t);
         if self.times.len() == 200 {
             let mut v = std::mem::take(&mut self.times);
