@@ -210,15 +210,19 @@ fn candidate(
         Err(e) => return failed(e.to_string()),
     };
     resumed.finish();
-    // A model that lacks an effect can settle in a poor basin (a mount error
-    // of a few degrees does that); the candidate may need the whole two-step
-    // fit from the start guess to show what it can do. Keep the better fit.
-    let fresh = Reconstruction::new(signals, full_settings).map(|mut f| {
-        f.finish();
-        f
+    // A model that lacks an effect can settle in a poor basin (a large mount
+    // error can do that): when the resumed fit is still far from the fixes
+    // (more than twice the GPS noise), the candidate also gets the whole
+    // two-step fit from the start guess, and the better fit is kept.
+    let poor = resumed.stats().rms_horizontal_m > 2.0 * full_settings.model.sigma_horizontal_m;
+    let fresh = poor.then(|| {
+        Reconstruction::new(signals, full_settings).map(|mut f| {
+            f.finish();
+            f
+        })
     });
     let fit = match fresh {
-        Ok(f) if f.stats().cost < resumed.stats().cost => f,
+        Some(Ok(f)) if f.stats().cost < resumed.stats().cost => f,
         _ => resumed,
     };
     let ho = match held_out(fit.model(), fit.params(), &settings, folds) {
