@@ -37,6 +37,13 @@ fn edited(duration_s: f64, edit: impl Fn(usize, Vec<String>) -> Option<Vec<Strin
     out
 }
 
+/// Empty the GPS fields (lat, lon, altitude) of a row.
+fn drop_fix(f: &mut [String]) {
+    for field in &mut f[5..=7] {
+        field.clear();
+    }
+}
+
 /// The message a fit of `csv` stops with.
 fn refusal(csv: &str) -> String {
     let sig = match parse(csv.as_bytes(), "ride.csv").map_err(|e| e.to_string()) {
@@ -76,9 +83,7 @@ fn fixes_too_sparse_for_a_course_are_refused() {
         if !f[5].is_empty() {
             kept.set(kept.get() + 1);
             if kept.get() % 20 != 1 {
-                f[5].clear();
-                f[6].clear();
-                f[7].clear();
+                drop_fix(&mut f);
             }
         }
         Some(f)
@@ -98,9 +103,7 @@ fn fewer_fixes_than_parameters_is_refused_with_the_counts() {
         if !f[5].is_empty() {
             kept.set(kept.get() + 1);
             if kept.get() % 20 > 2 {
-                f[5].clear();
-                f[6].clear();
-                f[7].clear();
+                drop_fix(&mut f);
             }
         }
         Some(f)
@@ -127,9 +130,7 @@ fn a_ride_shorter_than_one_segment_is_refused() {
 #[test]
 fn a_ride_without_any_fix_is_refused() {
     let csv = edited(60.0, |_, mut f| {
-        f[5].clear();
-        f[6].clear();
-        f[7].clear();
+        drop_fix(&mut f);
         Some(f)
     });
     let msg = refusal(&csv);

@@ -15,7 +15,7 @@
 use nalgebra::Vector3;
 
 use super::{fix_residuals, segment_biases};
-use crate::model::Model;
+use crate::model::{Model, Trajectory};
 
 /// One correlation.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -49,9 +49,8 @@ pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
 
 /// Per-row motion signals of the fitted path: speed (m/s), turn rate
 /// (deg/s about world up), accumulated heading change (deg), lean (deg).
-fn motion(model: &Model, theta: &[f64]) -> Vec<(String, Vec<f64>)> {
+fn motion(model: &Model, traj: &Trajectory) -> Vec<(String, Vec<f64>)> {
     let sig = &model.signals;
-    let traj = model.trajectory(theta);
     let n = sig.len();
     let (mut speed, mut turn, mut heading, mut lean) =
         (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
@@ -89,7 +88,7 @@ pub fn structure(model: &Model, theta: &[f64]) -> Vec<Correlation> {
     let sig = &model.signals;
     let traj = model.trajectory(theta);
     let res = fix_residuals(model, theta, &traj);
-    let signals = motion(model, theta);
+    let signals = motion(model, &traj);
     let mut out = Vec::new();
     let rows: Vec<usize> = res.iter().map(|r| r.row).collect();
     let mut quantities: Vec<(&str, Vec<f64>)> = vec![

@@ -210,23 +210,8 @@ impl Reconstruction {
     pub fn new(signals: Arc<Signals>, settings: FitSettings) -> Result<Self, FitError> {
         settings.validate()?;
         let model = Model::new(signals, settings.model.clone())?;
-        check_observability(&model)?;
         let theta = model.initial_params();
-        Self {
-            lm: LmState::new(settings.damping),
-            gd: GdState::new(settings.step_size),
-            model,
-            theta,
-            settings,
-            phase: Phase::Step1,
-            iteration: 0,
-            phase_iterations: [0, 0],
-            settings_changed: false,
-            history: Vec::new(),
-            window: None,
-            widened: false,
-        }
-        .with_first_window()
+        Self::at(model, theta, settings, false)?.with_first_window()
     }
 
     /// Continue a fitted ride on `model` from `theta` (its own layout, e.g. from
@@ -234,8 +219,6 @@ impl Reconstruction {
     /// step 2, without step 1's windows. Used after adding an effect to a fitted
     /// model or withholding fixes for validation, where the start is already close.
     pub fn resume(model: Model, theta: Vec<f64>, settings: FitSettings) -> Result<Self, FitError> {
-        settings.validate()?;
-        check_observability(&model)?;
         if theta.len() != model.n_params() {
             return Err(FitError::Setting(format!(
                 "{} parameters given for a model of {}",
@@ -247,7 +230,23 @@ impl Reconstruction {
             method: Method::Lm,
             ..settings
         };
-        let mut fit = Self {
+        let mut fit = Self::at(model, theta, settings, true)?;
+        if fit.has_segments() {
+            fit.phase = Phase::Step2;
+        }
+        Ok(fit)
+    }
+
+    /// A fit of `model` at `theta`, in step 1 with no window yet.
+    fn at(
+        model: Model,
+        theta: Vec<f64>,
+        settings: FitSettings,
+        widened: bool,
+    ) -> Result<Self, FitError> {
+        settings.validate()?;
+        check_observability(&model)?;
+        Ok(Self {
             lm: LmState::new(settings.damping),
             gd: GdState::new(settings.step_size),
             model,
@@ -259,12 +258,8 @@ impl Reconstruction {
             settings_changed: false,
             history: Vec::new(),
             window: None,
-            widened: true,
-        };
-        if fit.has_segments() {
-            fit.phase = Phase::Step2;
-        }
-        Ok(fit)
+            widened,
+        })
     }
 
     /// Iterate to the end without observers.
