@@ -35,7 +35,7 @@ impl Model {
         let (dist, dist_inputs) = self.corrected_distances(theta, true);
         let path = self.trajectory_corrected(theta, &rates, &dist);
         let sig = &self.signals;
-        let n = sig.len();
+        let n = self.horizon();
         let mut grad = vec![0.0; self.n_params()];
         let plan = self.obs_plan(theta);
         let (f, f_parts) = self.forward_axis(theta);

@@ -137,7 +137,7 @@ impl Model {
         let mut q = q0;
         let mut p = p0;
         let inc = self.spec.increment;
-        for j in 1..sig.len() {
+        for j in 1..self.horizon() {
             chain[0] = sig.gyro[j];
             for (i, &e) in self.gyro_chain.iter().enumerate() {
                 chain[i + 1] = self.effects[e].gyro(self.params_of(e, theta), j, chain[i]);

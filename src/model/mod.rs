@@ -17,6 +17,7 @@
 //! `C = sum r^2` plus prior rows (eq. 7 with weights `1/sigma^2`).
 
 mod adjoint;
+mod chain;
 mod jacobian;
 mod normal;
 mod observe;
@@ -24,6 +25,7 @@ pub mod rotation;
 mod start;
 mod sweep;
 
+pub use chain::ChainSystem;
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
@@ -91,6 +93,9 @@ impl Default for ModelSpec {
 /// minutes), not tuned on any ride.
 pub const DEFAULT_BIAS_WALK: f64 = 0.004;
 
+/// How far past the last fix of a window its model sweeps (s): beyond any GPS lag.
+const HORIZON_MARGIN_S: f64 = 5.0;
+
 /// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
 /// position at `row`, compared with `target`, weighted by `w = 1/sigma`.
 #[derive(Clone, Copy, Debug)]
@@ -122,6 +127,10 @@ pub struct Model {
     position: Option<usize>,
     baro: Option<usize>,
     n_prior: usize,
+    /// Rows swept: `0..horizon`. The whole ride, except for a model restricted
+    /// to a window of it, whose sweeps stop shortly after its last fix (step 1's
+    /// early windows then cost what their length costs, not the whole ride's).
+    horizon: usize,
 }
 
 impl Model {
@@ -204,6 +213,7 @@ impl Model {
                 });
             }
         }
+        let horizon = signals.len();
         Ok(Self {
             signals,
             spec,
@@ -217,6 +227,7 @@ impl Model {
             position,
             baro,
             n_prior,
+            horizon,
         })
     }
 
@@ -282,7 +293,14 @@ impl Model {
         let mut m = Self::with_start(self.signals.clone(), self.spec.clone(), self.start.clone())?;
         let t = &self.signals.t;
         m.observations.retain(|o| t[o.row] <= t_end);
+        // A fix looks at most a few seconds back (GPS lag), never past its own row.
+        m.horizon = t.partition_point(|&x| x <= t_end + HORIZON_MARGIN_S).max(1);
         Ok(m)
+    }
+
+    /// Rows `0..horizon` that the sweeps cover.
+    pub(crate) fn horizon(&self) -> usize {
+        self.horizon
     }
 
     /// Number of residual rows: observations then priors.
@@ -337,6 +355,14 @@ impl Model {
         let mut m = Model::with_start(self.signals.clone(), self.spec.clone(), self.start.clone())?;
         m.observations.retain(|o| keep(o.t));
         Ok(m)
+    }
+
+    /// The LM problem at `theta` over the `free` parameters in chain form, solved
+    /// in O(N) (see [`ChainSystem`]); `None` when the model's local parameters
+    /// do not form a chain (the dense normal equations then apply).
+    pub fn chain_system(&self, theta: &[f64], free: &[bool]) -> Option<ChainSystem> {
+        self.chain_linearisation(theta, free)
+            .and_then(|lin| ChainSystem::new(lin, self.n_params()))
     }
 
     /// Whether barometric rows are observed (the model fits the barometer's offset).

@@ -17,11 +17,12 @@
 //! of O(rows x P^2): for a 30-minute ride with 5 s segments (1,080 bias
 //! parameters) that is the difference between seconds and milliseconds.
 
-use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 
 use super::Model;
+use crate::effects::PriorRows;
 
-type V9 = SVector<f64, 9>;
+pub(crate) type V9 = SVector<f64, 9>;
 type M9 = SMatrix<f64, 9, 9>;
 
 /// `A = J^T J`, `g = J^T r` and the cost, over the free parameters.
@@ -34,11 +35,47 @@ pub struct NormalEquations {
     pub columns: Vec<usize>,
 }
 
+/// The linearised residuals of a model whose local parameters (segment
+/// biases) act on disjoint stretches of steps, kept in the form that both the
+/// dense normal equations and the O(N) chain solver ([`super::chain`]) use:
+/// per observation `o` the residual `r_o`, the 9-vector `h_o`, its global row
+/// and its explicit row for the block it lies in; per block parameter `y_c`.
+#[derive(Clone, Debug)]
+pub(crate) struct ChainLinearisation {
+    /// Free parameters, in parameter order.
+    pub columns: Vec<usize>,
+    /// Free parameters acting everywhere.
+    pub globals: Vec<usize>,
+    /// Blocks of local parameters, sorted by first step, disjoint.
+    pub blocks: Vec<Block>,
+    /// `y_c = [U_c; V_c; D_c]` of each block's parameters once the block is complete.
+    pub y: Vec<Vec<V9>>,
+    /// `h_o = w_o (row_a(-[p]x), -e_a, e_a)`.
+    pub h: Vec<V9>,
+    /// Where on the path observation `o` looks (`p`).
+    pub at: Vec<Vector3<f64>>,
+    /// Row in whose step observation `o` is evaluated.
+    pub rows: Vec<usize>,
+    /// Rows of the global parameters (observations x globals).
+    pub jg: DMatrix<f64>,
+    /// Block an observation lies in (`u32::MAX`: none) and its entries there.
+    pub jb: Vec<(u32, [f64; 3])>,
+    /// Weighted residuals of the observations.
+    pub r: DVector<f64>,
+    /// Prior rows (entries of free parameters only).
+    pub prior: PriorRows,
+    /// Cost of observations and priors.
+    pub cost: f64,
+    /// Rows swept by the model.
+    pub horizon: usize,
+}
+
 /// A group of local columns acting on the same stretch of steps.
-struct Block {
-    first: usize,
-    last: usize,
-    params: Vec<usize>,
+#[derive(Clone, Debug)]
+pub(crate) struct Block {
+    pub first: usize,
+    pub last: usize,
+    pub params: Vec<usize>,
 }
 
 impl Model {
@@ -60,7 +97,13 @@ impl Model {
             })
     }
 
-    fn structured_normal_equations(&self, theta: &[f64], free: &[bool]) -> Option<NormalEquations> {
+    /// The linearisation in chain form (see [`ChainLinearisation`]), or `None`
+    /// when local parameters overlap in a way the chain form does not cover.
+    pub(crate) fn chain_linearisation(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+    ) -> Option<ChainLinearisation> {
         let sig = &self.signals;
         let np = self.n_params();
         let columns: Vec<usize> = (0..np).filter(|&i| free[i]).collect();
@@ -112,10 +155,10 @@ impl Model {
         if blocks.iter().any(|b| b.params.len() > 3) {
             return None;
         }
-        let mut block_at = vec![u32::MAX; sig.len()];
+        let mut block_at = vec![u32::MAX; self.horizon()];
         for (b, block) in blocks.iter().enumerate() {
-            if block.first != usize::MAX {
-                for entry in &mut block_at[block.first..=block.last.min(sig.len() - 1)] {
+            if block.first < self.horizon() {
+                for entry in &mut block_at[block.first..=block.last.min(self.horizon() - 1)] {
                     *entry = b as u32;
                 }
             }
@@ -127,6 +170,7 @@ impl Model {
         let no = obs.len();
         let plan = self.obs_plan(theta);
         let mut h = vec![V9::zeros(); no];
+        let mut at = vec![Vector3::zeros(); no];
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
         let mut r = DVector::<f64>::zeros(no);
@@ -142,6 +186,7 @@ impl Model {
                 let a = o.axis;
                 let beta = plan.beta[k];
                 let p = plan.position(k, p_row, delta);
+                at[k] = p;
                 let v = plan.value(k, o, p[a]);
                 let w = v.slope;
                 r[k] = v.r;
@@ -198,6 +243,51 @@ impl Model {
             }
         });
 
+        let cost = r.norm_squared();
+        let mut prior = self.prior_rows(theta);
+        let prior_cost = prior.residuals.iter().map(|x| x * x).sum::<f64>();
+        prior.entries.retain(|&(_, col, _)| free[col]);
+        Some(ChainLinearisation {
+            columns,
+            globals,
+            blocks,
+            y,
+            h,
+            at,
+            rows: plan.row,
+            jg,
+            jb,
+            r,
+            prior,
+            cost: cost + prior_cost,
+            horizon: self.horizon(),
+        })
+    }
+
+    fn structured_normal_equations(&self, theta: &[f64], free: &[bool]) -> Option<NormalEquations> {
+        let c = self.chain_linearisation(theta, free)?;
+        Some(c.normal_equations(self.n_params()))
+    }
+}
+
+impl ChainLinearisation {
+    /// `J^T J` and `J^T r` assembled densely from the moments (O(N + P^2)).
+    fn normal_equations(&self, np: usize) -> NormalEquations {
+        let ChainLinearisation {
+            columns,
+            globals,
+            blocks,
+            y,
+            h,
+            rows,
+            jg,
+            jb,
+            r,
+            prior,
+            ..
+        } = self;
+        let no = r.len();
+        let ng = globals.len();
         // Suffix moments after each block: first observation past its last step.
         let nb = blocks.len();
         let after: Vec<usize> = blocks
@@ -206,7 +296,7 @@ impl Model {
                 if b.last == usize::MAX {
                     no
                 } else {
-                    plan.row.partition_point(|&row| row <= b.last)
+                    rows.partition_point(|&row| row <= b.last)
                 }
             })
             .collect();
@@ -250,8 +340,8 @@ impl Model {
         let mut g = DVector::<f64>::zeros(nf);
         // Global-global and global rhs.
         let jgt = jg.transpose();
-        let agg = &jgt * &jg;
-        let gg = &jgt * &r;
+        let agg = &jgt * jg;
+        let gg = &jgt * r;
         for (x, &ix) in globals.iter().enumerate() {
             g[pos[ix]] += gg[x];
             for (z, &iz) in globals.iter().enumerate() {
@@ -314,9 +404,7 @@ impl Model {
                 }
             }
         }
-        let mut cost = r.norm_squared();
         // Prior rows.
-        let prior = self.prior_rows(theta);
         let mut by_row: Vec<Vec<(usize, f64)>> = vec![Vec::new(); prior.residuals.len()];
         for &(row, col, val) in &prior.entries {
             if pos[col] != usize::MAX {
@@ -332,12 +420,11 @@ impl Model {
                 }
             }
         }
-        cost += prior.residuals.iter().map(|x| x * x).sum::<f64>();
-        Some(NormalEquations {
+        NormalEquations {
             a,
             g,
-            cost,
-            columns,
-        })
+            cost: self.cost,
+            columns: columns.clone(),
+        }
     }
 }

@@ -177,7 +177,7 @@ impl Model {
         let mut lag_moves = Vec::with_capacity(n);
         if lag.is_some() && lag_value != 0.0 && lag_value.is_finite() {
             let t = &sig.t;
-            let last = t.len() - 1;
+            let last = self.horizon() - 1;
             for o in obs {
                 let te = o.t - lag_value;
                 if te <= t[0] {

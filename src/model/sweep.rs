@@ -26,7 +26,7 @@ impl Model {
         theta: &[f64],
         keep_inputs: bool,
     ) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
-        let mut rates = self.signals.gyro.clone();
+        let mut rates = self.signals.gyro[..self.horizon()].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
             if keep_inputs {
@@ -43,7 +43,7 @@ impl Model {
         theta: &[f64],
         keep_inputs: bool,
     ) -> (Vec<f64>, Vec<Vec<f64>>) {
-        let mut d = self.signals.distance.clone();
+        let mut d = self.signals.distance[..self.horizon()].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.distance_chain {
             if keep_inputs {
@@ -80,7 +80,7 @@ impl Model {
         let inc = self.spec.increment;
         visit(0, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
-        for j in 1..sig.len() {
+        for j in 1..self.horizon() {
             let th = rates[j] * sig.dt[j];
             q *= inc.quaternion(&th);
             let d = dist[j];
@@ -103,7 +103,7 @@ impl Model {
         rates: &[Vector3<f64>],
         dist: &[f64],
     ) -> Trajectory {
-        let n = self.signals.len();
+        let n = self.horizon();
         let mut t = Trajectory {
             q: Vec::with_capacity(n),
             p: Vec::with_capacity(n),

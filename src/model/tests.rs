@@ -176,3 +176,49 @@ fn moment_normal_equations_equal_the_dense_ones() {
         }
     }
 }
+
+#[test]
+fn chain_solver_gives_the_dense_lm_step() {
+    use crate::optimisation::lm::damped_solve;
+    let full = catalogue_model();
+    // A step-1 window: observations up to 35 s, segments reached by then free.
+    let window = full.restricted(full.signals.t[0] + 35.0).unwrap();
+    let mut window_free = window.free_mask(&[effects::Role::Global, effects::Role::Segments]);
+    let seg = window.effect_index("gyro_bias_segments").unwrap();
+    for i in window.range(seg).skip(18) {
+        window_free[i] = false;
+    }
+    let mut cases: Vec<(Model, Vec<bool>)> = vec![(window, window_free)];
+    for m in [
+        model(Increment::Exact, None),
+        model(Increment::SmallAngle, Some(0.01)),
+        full,
+    ] {
+        for roles in [
+            vec![effects::Role::Global, effects::Role::Segments],
+            vec![effects::Role::Segments],
+        ] {
+            let free = m.free_mask(&roles);
+            cases.push((m.restricted(f64::INFINITY).unwrap(), free));
+        }
+    }
+    for (m, free) in &cases {
+        let p = perturbed(m);
+        let chain = m.chain_system(&p, free).expect("segments form a chain");
+        let ne = m.normal_equations(&p, free);
+        assert_eq!(chain.columns(), &ne.columns[..]);
+        assert!((chain.cost() - ne.cost).abs() < 1e-12 * ne.cost);
+        for lambda in [1e-8, 1e-3, 1.0, 1e3] {
+            let dense = damped_solve(&ne.a, &-&ne.g, lambda).unwrap();
+            let fast = chain.solve(lambda).unwrap();
+            let err = (&fast - &dense).norm() / dense.norm();
+            assert!(err < 1e-6, "lambda {lambda}: relative difference {err:e}");
+            let predicted = -(2.0 * dense.dot(&ne.g) + dense.dot(&(&ne.a * &dense)));
+            let fast_predicted = chain.predicted_decrease(&dense);
+            assert!(
+                (fast_predicted - predicted).abs() < 1e-8 * ne.cost,
+                "{fast_predicted} vs {predicted}"
+            );
+        }
+    }
+}

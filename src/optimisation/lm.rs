@@ -13,7 +13,7 @@
 use faer::linalg::solvers::Solve;
 use nalgebra::{DMatrix, DVector};
 
-use crate::model::Model;
+use crate::model::{ChainSystem, Model, NormalEquations};
 
 /// Damping state carried between iterations.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -66,6 +66,51 @@ pub fn damped_solve(a: &DMatrix<f64>, b: &DVector<f64>, lambda: f64) -> Option<D
     x.iter().all(|v| v.is_finite()).then_some(x)
 }
 
+/// The damped Gauss-Newton problem of one iteration: in chain form (O(N)) when
+/// the model allows it, else the dense normal equations.
+enum LinearSystem {
+    Chain(ChainSystem),
+    Dense(NormalEquations),
+}
+
+impl LinearSystem {
+    fn of(model: &Model, theta: &[f64], free: &[bool]) -> Self {
+        match model.chain_system(theta, free) {
+            Some(c) => Self::Chain(c),
+            None => Self::Dense(model.normal_equations(theta, free)),
+        }
+    }
+
+    fn cost(&self) -> f64 {
+        match self {
+            Self::Chain(c) => c.cost(),
+            Self::Dense(ne) => ne.cost,
+        }
+    }
+
+    fn columns(&self) -> &[usize] {
+        match self {
+            Self::Chain(c) => c.columns(),
+            Self::Dense(ne) => &ne.columns,
+        }
+    }
+
+    fn solve(&self, lambda: f64) -> Option<DVector<f64>> {
+        match self {
+            Self::Chain(c) => c.solve(lambda),
+            Self::Dense(ne) => damped_solve(&ne.a, &-&ne.g, lambda),
+        }
+    }
+
+    /// `C - ||r + J delta||^2`.
+    fn predicted_decrease(&self, delta: &DVector<f64>) -> f64 {
+        match self {
+            Self::Chain(c) => c.predicted_decrease(delta),
+            Self::Dense(ne) => -(2.0 * delta.dot(&ne.g) + delta.dot(&(&ne.a * delta))),
+        }
+    }
+}
+
 /// One LM iteration on the parameters where `free` is true.
 pub fn iterate(
     model: &Model,
@@ -74,21 +119,19 @@ pub fn iterate(
     state: &mut LmState,
     tolerance: f64,
 ) -> StepOutcome {
-    let ne = model.normal_equations(theta, free);
-    let cost = ne.cost;
-    let (a, g) = (&ne.a, &ne.g);
-    let neg_g = -g;
+    let system = LinearSystem::of(model, theta, free);
+    let cost = system.cost();
     let mut evaluations = 0;
     let mut trial = theta.to_vec();
     for _ in 0..MAX_TRIES {
-        if let Some(delta) = damped_solve(a, &neg_g, state.lambda) {
-            for (c, &i) in ne.columns.iter().enumerate() {
+        if let Some(delta) = system.solve(state.lambda) {
+            for (c, &i) in system.columns().iter().enumerate() {
                 trial[i] = theta[i] + delta[c];
             }
             let new_cost = model.cost(&trial);
             evaluations += 1;
             if new_cost.is_finite() && new_cost < cost {
-                let predicted = -(2.0 * delta.dot(g) + delta.dot(&(a * &delta)));
+                let predicted = system.predicted_decrease(&delta);
                 let rho = if predicted > 0.0 {
                     (cost - new_cost) / predicted
                 } else {

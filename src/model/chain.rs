@@ -1,0 +1,605 @@
+//! The Levenberg-Marquardt step in O(N): the damped Gauss-Newton problem
+//! solved along the ride as a chain (a square-root information smoother),
+//! without forming the P x P normal equations.
+//!
+//! A segment bias `b` moves the path after its segment only through its prefix
+//! sums (see [`super::jacobian`]), and of those only six numbers matter: the
+//! rotation `U_b` and, about an origin `c`, the translation
+//! `T_b = U_b x c + D_b - V_b`. So the linearised residual of observation `o`
+//! (axis `a`, position `p_o`, slope `w_o`) is
+//!
+//! ```text
+//! (J delta)_o = w_o (U x (p_o - c) + T)_a + J_o,in delta_in(o) + J_o,G delta_G
+//! s = (U, T) = sum over blocks complete before o of Y_b delta_b
+//! ```
+//!
+//! with `delta_in(o)` the block `o` lies in and `delta_G` the global parameters.
+//! The state `s` grows by `Y_b delta_b` when block `b` ends, the bias prior
+//! links neighbouring blocks only, so the LM problem
+//!
+//! ```text
+//! min ||r + J delta||^2 + ||r_p + J_p delta||^2 + sum_i (lambda D_i + eps) delta_i^2,  D = diag(J^T J)
+//! ```
+//!
+//! (exactly what [`crate::optimisation::lm::damped_solve`] solves densely) is a
+//! linear smoothing problem over the blocks. It is solved by Householder QR
+//! of an information array `[R | z]` over (open blocks, `s`, globals), updated
+//! block by block as in Bierman's square-root information filter: a new block
+//! adds columns, observations add rows, a finished block changes variables
+//! `s <- s + Y_b delta_b` (a column operation), and a block no longer linked to
+//! anything ahead is eliminated, its rows kept for the backward pass. Time and
+//! memory are O(N + S (9 + G)^2) instead of the dense solve's O(S^3) and
+//! O(S^2): a 6-hour ride has 13,000 bias parameters, whose dense normal
+//! matrix alone would take 1.3 GB.
+//!
+//! `s` starts at exactly zero; the array holds that as rows `W s = 0` with `W`
+//! far above every other row (Householder QR with the heavy rows on top keeps
+//! the light rows' accuracy). Unknowns are scaled by `sqrt(D_i)` so that the
+//! array's columns are of similar size.
+
+use nalgebra::{DMatrix, DVector, Vector3};
+
+use super::normal::{ChainLinearisation, V9};
+
+/// Weight of the rows that pin the initial state `s` to zero.
+const PIN: f64 = 1e8;
+
+/// Re-centre the rotation terms when an observation is this far from the origin (m).
+const RECENTRE_M: f64 = 50.0;
+
+/// The damped least-squares problem of one LM iteration, in chain form.
+#[derive(Clone, Debug)]
+pub struct ChainSystem {
+    lin: ChainLinearisation,
+    /// `diag(J^T J)` floored, per free column.
+    diag: Vec<f64>,
+    max_diag: f64,
+    /// Free-column index of each parameter (`usize::MAX`: not free).
+    pos: Vec<usize>,
+    /// Block of each free column (`usize::MAX`: global).
+    block_of: Vec<usize>,
+    /// Prior rows by the stage that adds them: 0 before any block, `b + 1` when block `b` opens.
+    prior_at: Vec<Vec<usize>>,
+    /// Prior entries grouped by row: `(free column, value)`.
+    prior_rows: Vec<Vec<(usize, f64)>>,
+}
+
+/// A change made during the forward pass, undone in reverse by the backward pass.
+enum Op {
+    /// The origin of `T` moved by `dc`.
+    Shift(Vector3<f64>),
+    /// Block `b` ended: `s += sum_x y6[x] x_b[x]`.
+    Complete { block: usize, y6: Vec<[f64; 6]> },
+    /// Block `b` was eliminated: `rows = [R_bb | R_rest | z]` over (b, then `rest` blocks, `s`, globals).
+    Eliminate {
+        block: usize,
+        rows: DMatrix<f64>,
+        rest: Vec<usize>,
+    },
+}
+
+/// The information array of the forward pass.
+struct Work {
+    /// Open blocks in column order, with their number of columns.
+    open: Vec<(usize, usize)>,
+    ng: usize,
+    /// Rows of `[R | z]`, `n + 1` columns.
+    rows: DMatrix<f64>,
+    /// Rows waiting to be folded in.
+    pending: Vec<Vec<f64>>,
+    origin: Vector3<f64>,
+}
+
+impl Work {
+    fn block_cols(&self) -> usize {
+        self.open.iter().map(|&(_, m)| m).sum()
+    }
+
+    fn n(&self) -> usize {
+        self.block_cols() + 6 + self.ng
+    }
+
+    fn s0(&self) -> usize {
+        self.block_cols()
+    }
+
+    fn g0(&self) -> usize {
+        self.block_cols() + 6
+    }
+
+    /// First column of open block `b`.
+    fn col_of(&self, b: usize) -> Option<usize> {
+        let mut c = 0;
+        for &(ob, m) in &self.open {
+            if ob == b {
+                return Some(c);
+            }
+            c += m;
+        }
+        None
+    }
+
+    /// Fold the pending rows into an upper-triangular `n x (n + 1)` array.
+    fn compress(&mut self) {
+        let n = self.n();
+        let nr = self.rows.nrows() + self.pending.len();
+        let mut stack = DMatrix::<f64>::zeros(nr.max(n), n + 1);
+        stack
+            .view_mut((0, 0), (self.rows.nrows(), n + 1))
+            .copy_from(&self.rows);
+        for (i, row) in self.pending.drain(..).enumerate() {
+            for (k, v) in row.into_iter().enumerate() {
+                stack[(self.rows.nrows() + i, k)] = v;
+            }
+        }
+        triangularise(&mut stack, n);
+        self.rows = stack.rows(0, n).into_owned();
+    }
+
+    /// Add `m` zero columns for block `b` after the open blocks.
+    fn open_block(&mut self, b: usize, m: usize) {
+        self.compress();
+        let at = self.block_cols();
+        let old = std::mem::replace(&mut self.rows, DMatrix::zeros(0, 0));
+        let n_old = old.ncols();
+        let mut new = DMatrix::<f64>::zeros(old.nrows(), n_old + m);
+        new.columns_mut(0, at).copy_from(&old.columns(0, at));
+        new.columns_mut(at + m, n_old - at)
+            .copy_from(&old.columns(at, n_old - at));
+        self.rows = new;
+        self.open.push((b, m));
+    }
+
+    /// `col(dst) += factor * col(src)` over all rows.
+    fn axpy_col(&mut self, dst: usize, src: usize, factor: f64) {
+        if factor == 0.0 {
+            return;
+        }
+        for i in 0..self.rows.nrows() {
+            let v = self.rows[(i, src)];
+            self.rows[(i, dst)] += factor * v;
+        }
+    }
+
+    /// Eliminate the first open block: its rows go to the backward pass.
+    fn eliminate_first(&mut self) -> Op {
+        self.compress();
+        let (block, m) = self.open.remove(0);
+        let n = self.rows.ncols() - 1;
+        let kept = self.rows.rows(0, m).into_owned();
+        self.rows = self.rows.view((m, m), (n - m, n - m + 1)).into_owned();
+        Op::Eliminate {
+            block,
+            rows: kept,
+            rest: self.open.iter().map(|&(b, _)| b).collect(),
+        }
+    }
+}
+
+/// Householder QR of the first `n` columns of `a` in place (rows below `n` end up zero).
+fn triangularise(a: &mut DMatrix<f64>, n: usize) {
+    let nr = a.nrows();
+    let nc = a.ncols();
+    let mut v = vec![0.0; nr];
+    for j in 0..n.min(nr) {
+        let norm = (j..nr).map(|i| a[(i, j)] * a[(i, j)]).sum::<f64>().sqrt();
+        if norm == 0.0 {
+            continue;
+        }
+        let x0 = a[(j, j)];
+        let alpha = if x0 > 0.0 { -norm } else { norm };
+        for i in j..nr {
+            v[i] = a[(i, j)];
+        }
+        v[j] -= alpha;
+        let vv = (j..nr).map(|i| v[i] * v[i]).sum::<f64>();
+        if vv == 0.0 {
+            continue;
+        }
+        a[(j, j)] = alpha;
+        for i in j + 1..nr {
+            a[(i, j)] = 0.0;
+        }
+        for k in j + 1..nc {
+            let dot = (j..nr).map(|i| v[i] * a[(i, k)]).sum::<f64>();
+            if dot == 0.0 {
+                continue;
+            }
+            let f = 2.0 * dot / vv;
+            for i in j..nr {
+                a[(i, k)] -= f * v[i];
+            }
+        }
+    }
+}
+
+/// Solve the upper-triangular `r x = z` (`r` square); `None` if singular or not finite.
+fn back_substitute(r: &DMatrix<f64>, z: &[f64]) -> Option<Vec<f64>> {
+    let n = z.len();
+    let mut x = vec![0.0; n];
+    for i in (0..n).rev() {
+        let mut v = z[i];
+        for (k, xk) in x.iter().enumerate().skip(i + 1) {
+            v -= r[(i, k)] * xk;
+        }
+        let d = r[(i, i)];
+        if d == 0.0 {
+            return None;
+        }
+        x[i] = v / d;
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// `(U, T)` of a 9-vector `y = [U; V; D]` about origin `c`: `T = U x c + D - V`.
+fn six(y: &V9, c: &Vector3<f64>) -> [f64; 6] {
+    let u = Vector3::new(y[0], y[1], y[2]);
+    let t = u.cross(c) + Vector3::new(y[6] - y[3], y[7] - y[4], y[8] - y[5]);
+    [u.x, u.y, u.z, t.x, t.y, t.z]
+}
+
+impl ChainSystem {
+    /// The chain form of `lin` over `np` parameters; `None` when a prior row
+    /// links blocks that are not neighbours (the chain would not be a chain).
+    pub(crate) fn new(lin: ChainLinearisation, np: usize) -> Option<Self> {
+        let nf = lin.columns.len();
+        let mut pos = vec![usize::MAX; np];
+        for (c, &i) in lin.columns.iter().enumerate() {
+            pos[i] = c;
+        }
+        let mut block_of = vec![usize::MAX; nf];
+        for (b, block) in lin.blocks.iter().enumerate() {
+            for &i in &block.params {
+                block_of[pos[i]] = b;
+            }
+        }
+        // diag(J^T J): globals and explicit rows, then the rows after each block
+        // from suffix moments of h h^T, then the priors.
+        let mut diag = vec![0.0; nf];
+        let no = lin.r.len();
+        for (g, &i) in lin.globals.iter().enumerate() {
+            diag[pos[i]] = lin.jg.column(g).norm_squared();
+        }
+        for &(b, vals) in &lin.jb {
+            if b != u32::MAX {
+                for (x, &i) in lin.blocks[b as usize].params.iter().enumerate() {
+                    diag[pos[i]] += vals[x] * vals[x];
+                }
+            }
+        }
+        let mut o = no;
+        let mut moments = nalgebra::SMatrix::<f64, 9, 9>::zeros();
+        for (b, block) in lin.blocks.iter().enumerate().rev() {
+            if block.last == usize::MAX {
+                continue;
+            }
+            let after = lin.rows.partition_point(|&row| row <= block.last);
+            while o > after {
+                o -= 1;
+                moments += lin.h[o] * lin.h[o].transpose();
+            }
+            for (x, &i) in block.params.iter().enumerate() {
+                diag[pos[i]] += lin.y[b][x].dot(&(moments * lin.y[b][x]));
+            }
+        }
+        let mut prior_rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); lin.prior.residuals.len()];
+        for &(row, col, val) in &lin.prior.entries {
+            if pos[col] != usize::MAX {
+                prior_rows[row].push((pos[col], val));
+                diag[pos[col]] += val * val;
+            }
+        }
+        let mut prior_at = vec![Vec::new(); lin.blocks.len() + 1];
+        for (row, entries) in prior_rows.iter().enumerate() {
+            let blocks: Vec<usize> = entries
+                .iter()
+                .map(|&(c, _)| block_of[c])
+                .filter(|&b| b != usize::MAX)
+                .collect();
+            match (blocks.iter().min(), blocks.iter().max()) {
+                (Some(&lo), Some(&hi)) if hi - lo > 1 => return None,
+                (_, Some(&hi)) => prior_at[hi + 1].push(row),
+                _ => prior_at[0].push(row),
+            }
+        }
+        let max_diag = diag.iter().copied().fold(0.0f64, f64::max);
+        let floor = (1e-9 * max_diag).max(1e-12);
+        for d in &mut diag {
+            *d = d.max(floor);
+        }
+        Some(Self {
+            lin,
+            diag,
+            max_diag,
+            pos,
+            block_of,
+            prior_at,
+            prior_rows,
+        })
+    }
+
+    pub fn cost(&self) -> f64 {
+        self.lin.cost
+    }
+
+    /// Parameter index of each entry of a step.
+    pub fn columns(&self) -> &[usize] {
+        &self.lin.columns
+    }
+
+    /// The LM step for damping `lambda`: the minimiser of the damped problem
+    /// in the module docs, one entry per free column; `None` if not finite.
+    pub fn solve(&self, lambda: f64) -> Option<DVector<f64>> {
+        let lin = &self.lin;
+        let nf = lin.columns.len();
+        let ng = lin.globals.len();
+        let scale: Vec<f64> = self.diag.iter().map(|d| d.sqrt()).collect();
+        let damping: Vec<f64> = self
+            .diag
+            .iter()
+            .map(|d| (lambda + 1e-15 * self.max_diag / d).sqrt())
+            .collect();
+        let global_col: Vec<usize> = lin.globals.iter().map(|&i| self.pos[i]).collect();
+        let mut work = Work {
+            open: Vec::new(),
+            ng,
+            rows: DMatrix::zeros(0, 7 + ng),
+            pending: Vec::new(),
+            origin: Vector3::zeros(),
+        };
+        let mut ops: Vec<Op> = Vec::new();
+        // s = 0 exactly, and the globals' damping and priors.
+        for k in 0..6 {
+            let mut row = vec![0.0; 7 + ng];
+            row[k] = PIN;
+            work.pending.push(row);
+        }
+        for (g, &c) in global_col.iter().enumerate() {
+            let mut row = vec![0.0; 7 + ng];
+            row[6 + g] = damping[c];
+            work.pending.push(row);
+        }
+        self.add_priors(&mut work, 0, &scale);
+
+        let blocks = &lin.blocks;
+        let nb = blocks.len();
+        let mut next_open = 0;
+        let mut next_complete = 0;
+        let open = |work: &mut Work, ops: &mut Vec<Op>, b: usize| {
+            let m = blocks[b].params.len();
+            work.open_block(b, m);
+            let c0 = work.col_of(b).unwrap_or(0);
+            for (x, &i) in blocks[b].params.iter().enumerate() {
+                let mut row = vec![0.0; work.n() + 1];
+                row[c0 + x] = damping[self.pos[i]];
+                work.pending.push(row);
+            }
+            self.add_priors(work, b + 1, &scale);
+            if work.open.len() > 1 {
+                ops.push(work.eliminate_first());
+            }
+        };
+        let complete = |work: &mut Work, ops: &mut Vec<Op>, b: usize| {
+            work.compress();
+            let c0 = work.col_of(b).unwrap_or(0);
+            let s0 = work.s0();
+            let y6: Vec<[f64; 6]> = blocks[b]
+                .params
+                .iter()
+                .enumerate()
+                .map(|(x, &i)| {
+                    let mut v = six(&lin.y[b][x], &work.origin);
+                    for e in &mut v {
+                        *e /= scale[self.pos[i]];
+                    }
+                    v
+                })
+                .collect();
+            // s_old = s_new - Y x_b: col(b) -= col(s) Y.
+            for (x, v) in y6.iter().enumerate() {
+                for (k, &yk) in v.iter().enumerate() {
+                    work.axpy_col(c0 + x, s0 + k, -yk);
+                }
+            }
+            ops.push(Op::Complete { block: b, y6 });
+        };
+        for o in 0..lin.r.len() {
+            let row = lin.rows[o];
+            loop {
+                while next_complete < next_open && blocks[next_complete].last < row {
+                    complete(&mut work, &mut ops, next_complete);
+                    next_complete += 1;
+                }
+                if next_open < nb && blocks[next_open].first <= row {
+                    open(&mut work, &mut ops, next_open);
+                    next_open += 1;
+                    continue;
+                }
+                break;
+            }
+            let p = lin.at[o];
+            if (p - work.origin).norm() > RECENTRE_M {
+                work.compress();
+                let dc = p - work.origin;
+                let s0 = work.s0();
+                // T_old = T_new + dc x U: col(U_j) += sum_i col(T_i) [dc]x_ij.
+                let k = dc.cross_matrix();
+                for j in 0..3 {
+                    for i in 0..3 {
+                        work.axpy_col(s0 + j, s0 + 3 + i, k[(i, j)]);
+                    }
+                }
+                work.origin = p;
+                ops.push(Op::Shift(dc));
+            }
+            let n = work.n();
+            let mut r = vec![0.0; n + 1];
+            let h = &lin.h[o];
+            // h = w (x x e_a, -e_a, e_a): recover w and the axis from the last three entries.
+            let axis = (0..3).find(|&a| h[6 + a] != 0.0);
+            if let Some(a) = axis {
+                let w = h[6 + a];
+                let rel = p - work.origin;
+                let mut e = Vector3::zeros();
+                e[a] = 1.0;
+                let ru = rel.cross(&e) * w;
+                let s0 = work.s0();
+                for k in 0..3 {
+                    r[s0 + k] = ru[k];
+                }
+                r[s0 + 3 + a] = w;
+            }
+            let (b, vals) = lin.jb[o];
+            if b != u32::MAX
+                && let Some(c0) = work.col_of(b as usize)
+            {
+                for (x, &i) in blocks[b as usize].params.iter().enumerate() {
+                    r[c0 + x] = vals[x] / scale[self.pos[i]];
+                }
+            }
+            let g0 = work.g0();
+            for (g, &c) in global_col.iter().enumerate() {
+                r[g0 + g] = lin.jg[(o, g)] / scale[c];
+            }
+            r[n] = -lin.r[o];
+            work.pending.push(r);
+            if work.pending.len() >= 2 * n {
+                work.compress();
+            }
+        }
+        while next_open < nb {
+            while next_complete < next_open && blocks[next_complete].last < lin.horizon {
+                complete(&mut work, &mut ops, next_complete);
+                next_complete += 1;
+            }
+            open(&mut work, &mut ops, next_open);
+            next_open += 1;
+        }
+        work.compress();
+
+        // Backward pass.
+        let n = work.n();
+        let z: Vec<f64> = work.rows.column(n).iter().copied().collect();
+        let last = back_substitute(&work.rows.columns(0, n).into_owned(), &z)?;
+        let mut xb: Vec<Vec<f64>> = vec![Vec::new(); nb];
+        let mut c = 0;
+        for &(b, m) in &work.open {
+            xb[b] = last[c..c + m].to_vec();
+            c += m;
+        }
+        let mut s = [0.0; 6];
+        s.copy_from_slice(&last[c..c + 6]);
+        let xg = last[c + 6..].to_vec();
+        for op in ops.into_iter().rev() {
+            match op {
+                Op::Shift(dc) => {
+                    let u = Vector3::new(s[0], s[1], s[2]);
+                    let t = Vector3::new(s[3], s[4], s[5]) + dc.cross(&u);
+                    s[3] = t.x;
+                    s[4] = t.y;
+                    s[5] = t.z;
+                }
+                Op::Complete { block, y6 } => {
+                    for (x, v) in y6.iter().enumerate() {
+                        let xv = xb[block].get(x).copied().unwrap_or(0.0);
+                        for k in 0..6 {
+                            s[k] -= v[k] * xv;
+                        }
+                    }
+                }
+                Op::Eliminate { block, rows, rest } => {
+                    let m = blocks[block].params.len();
+                    let mut known: Vec<f64> = Vec::new();
+                    for &b in &rest {
+                        known.extend_from_slice(&xb[b]);
+                    }
+                    known.extend_from_slice(&s);
+                    known.extend_from_slice(&xg);
+                    let ncols = rows.ncols();
+                    let rhs: Vec<f64> = (0..m)
+                        .map(|i| {
+                            rows[(i, ncols - 1)]
+                                - known
+                                    .iter()
+                                    .enumerate()
+                                    .map(|(k, v)| rows[(i, m + k)] * v)
+                                    .sum::<f64>()
+                        })
+                        .collect();
+                    xb[block] = back_substitute(&rows.columns(0, m).rows(0, m).into_owned(), &rhs)?;
+                }
+            }
+        }
+        let mut delta = DVector::<f64>::zeros(nf);
+        for (b, block) in blocks.iter().enumerate() {
+            for (x, &i) in block.params.iter().enumerate() {
+                let c = self.pos[i];
+                delta[c] = xb[b].get(x).copied().unwrap_or(0.0) / scale[c];
+            }
+        }
+        for (g, &c) in global_col.iter().enumerate() {
+            delta[c] = xg[g] / scale[c];
+        }
+        delta.iter().all(|v| v.is_finite()).then_some(delta)
+    }
+
+    /// Prior rows of stage `stage` into the array, in scaled unknowns.
+    fn add_priors(&self, work: &mut Work, stage: usize, scale: &[f64]) {
+        for &row in &self.prior_at[stage] {
+            let n = work.n();
+            let mut r = vec![0.0; n + 1];
+            for &(c, val) in &self.prior_rows[row] {
+                let b = self.block_of[c];
+                let col = if b == usize::MAX {
+                    self.lin.globals.iter().position(|&i| self.pos[i] == c).map(|g| work.g0() + g)
+                } else {
+                    let x = self.lin.blocks[b].params.iter().position(|&i| self.pos[i] == c);
+                    work.col_of(b).zip(x).map(|(c0, x)| c0 + x)
+                };
+                if let Some(col) = col {
+                    r[col] += val / scale[c];
+                }
+            }
+            r[n] = -self.lin.prior.residuals[row];
+            work.pending.push(r);
+        }
+    }
+
+    /// Cost decrease that the linear model predicts for `delta`:
+    /// `C - (||r + J delta||^2 + ||r_p + J_p delta||^2)`.
+    pub fn predicted_decrease(&self, delta: &DVector<f64>) -> f64 {
+        let lin = &self.lin;
+        let mut s = V9::zeros();
+        let mut next = 0;
+        let mut model = 0.0;
+        for o in 0..lin.r.len() {
+            let row = lin.rows[o];
+            while next < lin.blocks.len()
+                && lin.blocks[next].last != usize::MAX
+                && lin.blocks[next].last < row
+            {
+                for (x, &i) in lin.blocks[next].params.iter().enumerate() {
+                    s += lin.y[next][x] * delta[self.pos[i]];
+                }
+                next += 1;
+            }
+            let mut jd = lin.h[o].dot(&s);
+            let (b, vals) = lin.jb[o];
+            if b != u32::MAX {
+                for (x, &i) in lin.blocks[b as usize].params.iter().enumerate() {
+                    jd += vals[x] * delta[self.pos[i]];
+                }
+            }
+            for (g, &i) in lin.globals.iter().enumerate() {
+                jd += lin.jg[(o, g)] * delta[self.pos[i]];
+            }
+            model += (lin.r[o] + jd).powi(2);
+        }
+        for (row, entries) in self.prior_rows.iter().enumerate() {
+            let v = self.lin.prior.residuals[row]
+                + entries.iter().map(|&(c, val)| val * delta[c]).sum::<f64>();
+            model += v * v;
+        }
+        self.lin.cost - model
+    }
+}
