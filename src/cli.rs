@@ -272,8 +272,9 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     }
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
     if let Some(out) = &args.out {
-        let path = fit.trajectory();
-        write_atomically(out, Some(ride), |w| write_path_csv(w, fit.model(), &path))?;
+        write_atomically(out, Some(ride), |w| {
+            write_path_csv(w, fit.model(), fit.params())
+        })?;
     }
     if let Some(rep) = &args.report {
         write_atomically(rep, Some(ride), |w| {
@@ -325,9 +326,8 @@ fn fit_one(ride: &Path, settings: &FitSettings, out_dir: &Path) -> Result<FitRep
     let stem = ride
         .file_stem()
         .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned());
-    let path = fit.trajectory();
     write_atomically(&out_dir.join(format!("{stem}-path.csv")), Some(ride), |w| {
-        write_path_csv(w, fit.model(), &path)
+        write_path_csv(w, fit.model(), fit.params())
     })?;
     write_atomically(
         &out_dir.join(format!("{stem}-report.json")),

@@ -65,21 +65,21 @@ pub fn write_atomically(
 
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
 /// compass heading) for every row of the log.
-pub fn write_path_csv(
-    out: &mut dyn Write,
-    model: &Model,
-    path: &Trajectory,
-) -> std::io::Result<()> {
+pub fn write_path_csv(out: &mut dyn Write, model: &Model, theta: &[f64]) -> std::io::Result<()> {
     let sig = &model.signals;
     writeln!(
         out,
         "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg"
     )?;
-    for j in 0..sig.len() {
-        let p = &path.p[j];
+    // Row by row from one sweep: a 6-hour ride's path is never held in memory.
+    let mut result = Ok(());
+    model.for_each_pose(theta, |j, q, p| {
+        if result.is_err() {
+            return;
+        }
         let g = sig.frame.to_geodetic(p);
-        let f = path.q[j] * nalgebra::Vector3::x();
-        writeln!(
+        let f = q * nalgebra::Vector3::x();
+        result = writeln!(
             out,
             "{},{:.9},{:.9},{:.3},{:.3},{:.3},{:.3},{:.2}",
             sig.t[j],
@@ -90,9 +90,9 @@ pub fn write_path_csv(
             p.y,
             p.z,
             compass_deg(f.x, f.y)
-        )?;
-    }
-    Ok(())
+        );
+    });
+    result
 }
 
 /// Write the reconstructed path as a GPX 1.1 track (for map tools), at most

@@ -422,12 +422,12 @@ impl Worker {
         };
         let model = fit.model();
         let result = match kind {
-            ExportKind::PathCsv | ExportKind::PathGpx => {
+            ExportKind::PathCsv => {
+                write_atomically(path, protect, |w| write_path_csv(w, model, fit.params()))
+            }
+            ExportKind::PathGpx => {
                 let traj = fit.trajectory();
-                write_atomically(path, protect, |w| match kind {
-                    ExportKind::PathGpx => write_path_gpx(w, model, &traj),
-                    _ => write_path_csv(w, model, &traj),
-                })
+                write_atomically(path, protect, |w| write_path_gpx(w, model, &traj))
             }
             ExportKind::ReportJson => {
                 let report = FitReport::new(fit, 0.0);

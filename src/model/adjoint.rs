@@ -31,8 +31,8 @@ impl Model {
     pub fn gradient(&self, theta: &[f64]) -> (f64, Vec<f64>) {
         // The corrected signals with every chain stage kept: the path is built
         // from them and the back-propagation below needs the stage inputs.
-        let (rates, rate_inputs) = self.corrected_rates(theta, true);
-        let (dist, dist_inputs) = self.corrected_distances(theta, true);
+        let (rates, rate_inputs) = self.corrected_rates(theta, 0, true);
+        let (dist, dist_inputs) = self.corrected_distances(theta, 0, true);
         let path = self.trajectory_corrected(theta, &rates, &dist);
         let sig = &self.signals;
         let n = self.horizon();

@@ -551,9 +551,16 @@ impl ChainSystem {
             for &(c, val) in &self.prior_rows[row] {
                 let b = self.block_of[c];
                 let col = if b == usize::MAX {
-                    self.lin.globals.iter().position(|&i| self.pos[i] == c).map(|g| work.g0() + g)
+                    self.lin
+                        .globals
+                        .iter()
+                        .position(|&i| self.pos[i] == c)
+                        .map(|g| work.g0() + g)
                 } else {
-                    let x = self.lin.blocks[b].params.iter().position(|&i| self.pos[i] == c);
+                    let x = self.lin.blocks[b]
+                        .params
+                        .iter()
+                        .position(|&i| self.pos[i] == c);
                     work.col_of(b).zip(x).map(|(c0, x)| c0 + x)
                 };
                 if let Some(col) = col {

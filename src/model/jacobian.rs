@@ -100,8 +100,15 @@ impl Model {
     ) {
         let sig = &self.signals;
         let mut sums = PrefixSums::new(self.n_params());
-        let (q0, p0, phi) = self.initial_state(theta);
-        if let Some(e) = self.position {
+        // From the anchor when nothing free acts before it, else from the start.
+        let (first, q0, p0, phi) = match self.anchor_for(theta) {
+            Some(a) if self.anchor_holds(free) => (a.row, a.q, a.p, Vector3::zeros()),
+            _ => {
+                let (q, p, phi) = self.initial_state(theta);
+                (0, q, p, phi)
+            }
+        };
+        if let Some(e) = self.position.filter(|_| first == 0) {
             for a in 0..3 {
                 let i = self.offsets[e] + a;
                 if free[i] {
@@ -110,7 +117,7 @@ impl Model {
                 }
             }
         }
-        if let Some(e) = self.orientation {
+        if let Some(e) = self.orientation.filter(|_| first == 0) {
             let jl = left_jacobian(&phi);
             for a in 0..3 {
                 let i = self.offsets[e] + a;
@@ -131,13 +138,13 @@ impl Model {
                 }
             }
         };
-        visit(0, &p0, &Vector3::zeros(), &sums);
+        visit(first, &p0, &Vector3::zeros(), &sums);
         let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
         let mut dchain = vec![0.0; self.distance_chain.len() + 1];
         let mut q = q0;
         let mut p = p0;
         let inc = self.spec.increment;
-        for j in 1..self.horizon() {
+        for j in first + 1..self.horizon() {
             chain[0] = sig.gyro[j];
             for (i, &e) in self.gyro_chain.iter().enumerate() {
                 chain[i + 1] = self.effects[e].gyro(self.params_of(e, theta), j, chain[i]);

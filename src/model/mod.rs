@@ -131,6 +131,18 @@ pub struct Model {
     /// to a window of it, whose sweeps stop shortly after its last fix (step 1's
     /// early windows then cost what their length costs, not the whole ride's).
     horizon: usize,
+    /// Where the sweeps of a window start (see [`Model::window`]); `None`: at row 0.
+    anchor: Option<Anchor>,
+}
+
+/// A fixed state on the path: sweeps that start here skip the rows before it.
+#[derive(Clone, Debug)]
+pub(crate) struct Anchor {
+    pub row: usize,
+    pub q: UnitQuaternion<f64>,
+    pub p: Vector3<f64>,
+    /// Every parameter acting at or before `row`, with the value the state was computed at.
+    fixed: Vec<(usize, f64)>,
 }
 
 impl Model {
@@ -228,6 +240,7 @@ impl Model {
             baro,
             n_prior,
             horizon,
+            anchor: None,
         })
     }
 
@@ -301,6 +314,78 @@ impl Model {
     /// Rows `0..horizon` that the sweeps cover.
     pub(crate) fn horizon(&self) -> usize {
         self.horizon
+    }
+
+    /// First row of the cost sweep: the anchor's, or 0.
+    pub(crate) fn first_row(&self) -> usize {
+        self.anchor.as_ref().map_or(0, |a| a.row)
+    }
+
+    /// The anchor, if `theta` still has the values it was computed at.
+    pub(crate) fn anchor_for(&self, theta: &[f64]) -> Option<&Anchor> {
+        self.anchor.as_ref().filter(|a| {
+            a.fixed
+                .iter()
+                .all(|&(i, v)| theta[i].to_bits() == v.to_bits())
+        })
+    }
+
+    /// The same model seeing only the GPS rows after log row `anchor_row` and
+    /// up to `t_end`, its cost sweeps starting at `anchor_row` from the state
+    /// the path has there at `theta`. Step 1's late windows on a long ride fit
+    /// only the segment biases of the last stretch; the path before it is
+    /// fixed, so sweeping it again at every iteration would make the fit
+    /// quadratic in the ride's length. The anchor is used only while every
+    /// parameter acting at or before `anchor_row` keeps its value; otherwise
+    /// (and for derivatives with respect to such parameters) the sweeps start
+    /// from row 0 as in any model.
+    pub fn window(&self, theta: &[f64], anchor_row: usize, t_end: f64) -> Result<Self, ModelError> {
+        let mut m = self.restricted(t_end)?;
+        let anchor_row = anchor_row.min(m.horizon - 1);
+        // The state at the anchor, from this model's own start (itself maybe an anchor before it).
+        let from = if self.first_row() <= anchor_row {
+            self
+        } else {
+            &m
+        };
+        let mut state = None;
+        from.sweep(theta, |j, q, p, _, _| {
+            if j == anchor_row {
+                state = Some((*q, *p));
+            }
+        });
+        if let Some((q, p)) = state {
+            m.observations.retain(|o| o.row > anchor_row);
+            let fixed = (0..self.n_params())
+                .filter(|&i| !self.acts_after(i, anchor_row))
+                .map(|i| (i, theta[i]))
+                .collect();
+            m.anchor = Some(Anchor {
+                row: anchor_row,
+                q,
+                p,
+                fixed,
+            });
+        }
+        Ok(m)
+    }
+
+    /// Whether parameter `i` acts only on steps after `row`.
+    fn acts_after(&self, i: usize, row: usize) -> bool {
+        let e = self.offsets.partition_point(|&o| o <= i) - 1;
+        self.effects[e]
+            .param_steps(i - self.offsets[e])
+            .is_some_and(|(first, _)| first > row)
+    }
+
+    /// Whether every free parameter acts only after the anchor, so that
+    /// prefix sums may start there (the anchor stays valid while they change).
+    pub(crate) fn anchor_holds(&self, free: &[bool]) -> bool {
+        self.anchor.as_ref().is_none_or(|a| {
+            free.iter()
+                .enumerate()
+                .all(|(i, &f)| !f || self.acts_after(i, a.row))
+        })
     }
 
     /// Number of residual rows: observations then priors.

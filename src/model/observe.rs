@@ -178,10 +178,11 @@ impl Model {
         if lag.is_some() && lag_value != 0.0 && lag_value.is_finite() {
             let t = &sig.t;
             let last = self.horizon() - 1;
+            let first = self.anchor_for(theta).map_or(0, |a| a.row);
             for o in obs {
                 let te = o.t - lag_value;
-                if te <= t[0] {
-                    row.push(0);
+                if te <= t[first] {
+                    row.push(first);
                     beta.push(0.0);
                     lag_moves.push(false);
                 } else if te >= t[last] {

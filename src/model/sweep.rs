@@ -21,18 +21,27 @@ pub struct Trajectory {
 impl Model {
     /// Corrected rates (rad/s) of every step: the gyro chain applied in batch.
     /// With `keep_inputs`, also the input of every gyro effect (for back-propagation).
+    /// Rows before `first` are left out (`rates[j - first]` is row `j`'s).
     pub(crate) fn corrected_rates(
         &self,
         theta: &[f64],
+        first: usize,
         keep_inputs: bool,
     ) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
-        let mut rates = self.signals.gyro[..self.horizon()].to_vec();
+        let mut rates = self.signals.gyro[first..self.horizon()].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
             if keep_inputs {
                 inputs.push(rates.clone());
             }
-            self.effects[e].gyro_batch(self.params_of(e, theta), &mut rates);
+            let p = self.params_of(e, theta);
+            if first == 0 {
+                self.effects[e].gyro_batch(p, &mut rates);
+            } else {
+                for (k, w) in rates.iter_mut().enumerate() {
+                    *w = self.effects[e].gyro(p, first + k, *w);
+                }
+            }
         }
         (rates, inputs)
     }
@@ -41,58 +50,88 @@ impl Model {
     pub(crate) fn corrected_distances(
         &self,
         theta: &[f64],
+        first: usize,
         keep_inputs: bool,
     ) -> (Vec<f64>, Vec<Vec<f64>>) {
-        let mut d = self.signals.distance[..self.horizon()].to_vec();
+        let mut d = self.signals.distance[first..self.horizon()].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.distance_chain {
             if keep_inputs {
                 inputs.push(d.clone());
             }
-            self.effects[e].distance_batch(self.params_of(e, theta), &mut d);
+            let p = self.params_of(e, theta);
+            if first == 0 {
+                self.effects[e].distance_batch(p, &mut d);
+            } else {
+                for (k, x) in d.iter_mut().enumerate() {
+                    *x = self.effects[e].distance(p, first + k, *x);
+                }
+            }
         }
         (d, inputs)
     }
 
-    /// Run eq. 1-4 over the ride, calling `visit(j, q_j, p_j, theta_j, d_j)` at every row.
+    /// Run eq. 1-4 over the ride (from the anchor of a window), calling
+    /// `visit(j, q_j, p_j, theta_j, d_j)` at every row.
     #[inline]
     pub(crate) fn sweep(
         &self,
         theta: &[f64],
         visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
-        let (rates, _) = self.corrected_rates(theta, false);
-        let (dist, _) = self.corrected_distances(theta, false);
-        self.sweep_corrected(theta, &rates, &dist, visit);
+        let first = self.anchor_for(theta).map_or(0, |a| a.row);
+        let (rates, _) = self.corrected_rates(theta, first, false);
+        let (dist, _) = self.corrected_distances(theta, first, false);
+        self.sweep_corrected(theta, first, &rates, &dist, visit);
     }
 
-    /// Eq. 1-4 from already corrected rates and distances (see [`sweep`](Model::sweep)).
+    /// Eq. 1-4 from row `first` (0 or the anchor's) with already corrected
+    /// rates and distances of the rows from `first` on (see [`sweep`](Model::sweep)).
     #[inline]
     fn sweep_corrected(
         &self,
         theta: &[f64],
+        first: usize,
         rates: &[Vector3<f64>],
         dist: &[f64],
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
-        let (mut q, mut p, _) = self.initial_state(theta);
+        let (mut q, mut p) = match self.anchor_for(theta) {
+            Some(a) if a.row == first => (a.q, a.p),
+            _ => {
+                let (q, p, _) = self.initial_state(theta);
+                (q, p)
+            }
+        };
         let (f, _) = self.forward_axis(theta);
         let inc = self.spec.increment;
-        visit(0, &q, &p, &Vector3::zeros(), 0.0);
+        visit(first, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
-        for j in 1..self.horizon() {
-            let th = rates[j] * sig.dt[j];
+        for j in first + 1..self.horizon() {
+            let th = rates[j - first] * sig.dt[j];
             q *= inc.quaternion(&th);
-            let d = dist[j];
+            let d = dist[j - first];
             p += q * (f * d);
             visit(j, &q, &p, &th, d);
         }
     }
 
-    /// The full path for `theta`.
+    /// Attitude and position at every row of the ride, in order, without
+    /// storing the path (`visit(j, q_j, p_j)`).
+    pub fn for_each_pose(
+        &self,
+        theta: &[f64],
+        mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>),
+    ) {
+        let (rates, _) = self.corrected_rates(theta, 0, false);
+        let (dist, _) = self.corrected_distances(theta, 0, false);
+        self.sweep_corrected(theta, 0, &rates, &dist, |j, q, p, _, _| visit(j, q, p));
+    }
+
+    /// The full path for `theta` (from row 0, also for a window).
     pub fn trajectory(&self, theta: &[f64]) -> Trajectory {
-        let (rates, _) = self.corrected_rates(theta, false);
-        let (dist, _) = self.corrected_distances(theta, false);
+        let (rates, _) = self.corrected_rates(theta, 0, false);
+        let (dist, _) = self.corrected_distances(theta, 0, false);
         self.trajectory_corrected(theta, &rates, &dist)
     }
 
@@ -110,7 +149,7 @@ impl Model {
             theta: Vec::with_capacity(n),
             d: Vec::with_capacity(n),
         };
-        self.sweep_corrected(theta, rates, dist, |_, q, p, th, d| {
+        self.sweep_corrected(theta, 0, rates, dist, |_, q, p, th, d| {
             t.q.push(*q);
             t.p.push(*p);
             t.theta.push(*th);

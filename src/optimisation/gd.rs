@@ -58,6 +58,7 @@ pub fn iterate(
             accepted: true,
             converged: state.flat >= 5,
             evaluations: 2,
+            evaluation: None,
         }
     } else {
         state.gamma *= 0.5;
@@ -67,6 +68,7 @@ pub fn iterate(
             accepted: false,
             converged: state.gamma < 1e-30,
             evaluations: 2,
+            evaluation: None,
         }
     }
 }

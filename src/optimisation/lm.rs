@@ -13,7 +13,7 @@
 use faer::linalg::solvers::Solve;
 use nalgebra::{DMatrix, DVector};
 
-use crate::model::{ChainSystem, Model, NormalEquations};
+use crate::model::{ChainSystem, Evaluation, Model, NormalEquations};
 
 /// Damping state carried between iterations.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -45,6 +45,8 @@ pub struct StepOutcome {
     pub converged: bool,
     /// Cost evaluations made.
     pub evaluations: usize,
+    /// The evaluation of the accepted parameters, when the step made one.
+    pub evaluation: Option<Evaluation>,
 }
 
 /// Solve `(A + lambda D) x = b` by Cholesky, `D = diag(A)` floored at
@@ -128,7 +130,8 @@ pub fn iterate(
             for (c, &i) in system.columns().iter().enumerate() {
                 trial[i] = theta[i] + delta[c];
             }
-            let new_cost = model.cost(&trial);
+            let evaluation = model.evaluate(&trial);
+            let new_cost = evaluation.cost;
             evaluations += 1;
             if new_cost.is_finite() && new_cost < cost {
                 let predicted = system.predicted_decrease(&delta);
@@ -147,6 +150,7 @@ pub fn iterate(
                     accepted: true,
                     converged: cost - new_cost <= tolerance * cost,
                     evaluations,
+                    evaluation: Some(evaluation),
                 };
             }
         }
@@ -159,5 +163,6 @@ pub fn iterate(
         accepted: false,
         converged: true,
         evaluations,
+        evaluation: None,
     }
 }

@@ -24,7 +24,7 @@ use std::sync::Arc;
 use thiserror::Error;
 
 use crate::effects::Role;
-use crate::model::{Model, ModelError, ModelSpec, Trajectory};
+use crate::model::{Evaluation, Model, ModelError, ModelSpec, Trajectory};
 use crate::signals::Signals;
 
 pub use gd::GdState;
@@ -131,7 +131,8 @@ pub struct IterationReport {
     pub method: Method,
     pub cost: f64,
     pub accepted: bool,
-    /// Horizontal distance RMS between path and GPS fixes (m).
+    /// Horizontal distance RMS between path and GPS fixes (m), over the
+    /// fixes the iteration fitted: in step 1 those of its window.
     pub rms_horizontal_m: f64,
     pub damping: f64,
     pub step_size: f64,
@@ -155,7 +156,10 @@ pub struct FitStats {
 
 impl FitStats {
     pub fn of(model: &Model, theta: &[f64]) -> Self {
-        let ev = model.evaluate(theta);
+        Self::from_evaluation(&model.evaluate(theta))
+    }
+
+    pub fn from_evaluation(ev: &Evaluation) -> Self {
         let rms =
             |s: usize| (ev.count[s] > 0).then(|| (ev.sum_sq_m[s] / ev.count[s] as f64).sqrt());
         Self {
@@ -190,17 +194,43 @@ pub struct Reconstruction {
     gd: GdState,
     iteration: usize,
     phase_iterations: [usize; 2],
+    /// Iterations since the phase started or step 1's window last widened:
+    /// the iteration limit applies to each window, so a long ride's many
+    /// windows do not use up step 1's budget.
+    stage_iterations: usize,
     settings_changed: bool,
     history: Vec<IterationReport>,
-    /// Step 1's growing window (s of ride) and its model; `None` once it covers the ride.
-    window: Option<(f64, Model)>,
+    /// Step 1's growing window; `None` once it covers the ride.
+    window: Option<Window>,
     /// Step 1 has moved past its first window: from here on it fits the
     /// segment biases instead of the constant bias (when the model has a prior).
     widened: bool,
 }
 
+/// Step 1's window: the first `length` seconds of the ride, seen by `model`.
+#[derive(Debug)]
+struct Window {
+    length: f64,
+    model: Model,
+    /// Log time from which an anchored window fits the segment biases (the
+    /// path before is fixed and not swept again); `None`: from the start.
+    from: Option<f64>,
+}
+
+/// A window this long (s) or longer is followed by anchored windows, which
+/// fit only the segment biases of their last stretch: the globals are settled
+/// by then, and refitting the whole ride at every widening would make step 1
+/// quadratic in the ride's length.
+const ANCHOR_AFTER_S: f64 = 900.0;
+
+/// An anchored window refits this much (s) of the stretch its predecessor fitted.
+const ANCHOR_OVERLAP_S: f64 = 600.0;
+
 /// Step 1 widens its window by at most this much at a time (s).
 const MAX_WIDENING_S: f64 = 300.0;
+
+/// Relative cost decrease below which a window that will still widen counts as converged.
+const WINDOW_TOLERANCE: f64 = 1e-3;
 
 /// Step 1's first window (s); it grows by half each time the fit on it converges.
 const FIRST_WINDOW_S: f64 = 120.0;
@@ -255,6 +285,7 @@ impl Reconstruction {
             phase: Phase::Step1,
             iteration: 0,
             phase_iterations: [0, 0],
+            stage_iterations: 0,
             settings_changed: false,
             history: Vec::new(),
             window: None,
@@ -273,12 +304,44 @@ impl Reconstruction {
         Ok(self)
     }
 
-    fn next_window(&self, length: f64) -> Result<Option<(f64, Model)>, FitError> {
+    fn next_window(&self, length: f64) -> Result<Option<Window>, FitError> {
         let sig = &self.model.signals;
         if length >= sig.duration() {
             return Ok(None);
         }
-        Ok(Some((length, self.model.restricted(sig.t[0] + length)?)))
+        let t_end = sig.t[0] + length;
+        if let Some(prev) = &self.window
+            && prev.length >= ANCHOR_AFTER_S
+            && self.windows_fit_segments()
+        {
+            let from = sig.t[0] + prev.length - ANCHOR_OVERLAP_S;
+            if let Some((row, start)) = self.first_segment_from(from) {
+                return Ok(Some(Window {
+                    length,
+                    model: prev.model.window(&self.theta, row - 1, t_end)?,
+                    from: Some(start),
+                }));
+            }
+        }
+        Ok(Some(Window {
+            length,
+            model: self.model.restricted(t_end)?,
+            from: None,
+        }))
+    }
+
+    /// The first step and start time of the first segment starting at or after `from`.
+    fn first_segment_from(&self, from: f64) -> Option<(usize, f64)> {
+        let t = &self.model.signals.t;
+        self.model
+            .effects()
+            .iter()
+            .filter(|e| e.role() == Role::Segments)
+            .flat_map(|e| (0..e.n_params()).filter_map(|k| e.param_steps(k)))
+            .map(|(first, _)| first)
+            .filter(|&first| first >= 1 && first < t.len() && t[first] >= from)
+            .min()
+            .map(|first| (first, t[first]))
     }
 
     pub fn model(&self) -> &Model {
@@ -333,12 +396,18 @@ impl Reconstruction {
     fn mask(&self, phase: Phase) -> Vec<bool> {
         match (phase, self.settings.method) {
             (Phase::Step1, _) if self.windows_fit_segments() => {
-                let mut free = self.model.free_mask(&[Role::Global, Role::Segments]);
+                let from = self.window.as_ref().and_then(|w| w.from);
+                // An anchored window fits its own segments only.
+                let roles: &[Role] = match from {
+                    Some(_) => &[Role::Segments],
+                    None => &[Role::Global, Role::Segments],
+                };
+                let mut free = self.model.free_mask(roles);
                 // Only the segments the window reaches: the others have no
-                // observation yet and would only make the dense solve bigger.
+                // observation yet.
                 if let Some(end) = self.window_end() {
                     for (i, _, started) in self.segment_starts() {
-                        free[i] &= started < end;
+                        free[i] &= started < end && from.is_none_or(|f| started >= f);
                     }
                 }
                 free
@@ -353,7 +422,7 @@ impl Reconstruction {
     fn window_end(&self) -> Option<f64> {
         self.window
             .as_ref()
-            .map(|(length, _)| self.model.signals.t[0] + length)
+            .map(|w| self.model.signals.t[0] + w.length)
     }
 
     /// Every segment parameter (its index and the index of the first of its
@@ -438,8 +507,14 @@ impl Reconstruction {
             )
         } else if free.iter().any(|&f| f) {
             let model = match (&self.window, phase) {
-                (Some((_, m)), Phase::Step1) => m,
+                (Some(w), Phase::Step1) => &w.model,
                 _ => &self.model,
+            };
+            // A window that will be widened only has to bring the fit into the
+            // right basin; the next window refines it.
+            let tol = match (&self.window, phase) {
+                (Some(_), Phase::Step1) => tol.max(WINDOW_TOLERANCE),
+                _ => tol,
             };
             lm::iterate(model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
@@ -450,16 +525,19 @@ impl Reconstruction {
                 accepted: false,
                 converged: true,
                 evaluations: 1,
+                evaluation: None,
             }
         };
         self.iteration += 1;
         self.phase_iterations[slot] += 1;
+        self.stage_iterations += 1;
+        let stage_done = outcome.converged || self.stage_iterations >= self.settings.max_iter;
         if phase == Phase::Step1
-            && let Some((length, _)) = &self.window
-            && outcome.converged
+            && let Some(window) = &self.window
+            && stage_done
         {
             // Widen the window and keep fitting step 1.
-            let length = *length;
+            let length = window.length;
             // By half, but by at most five minutes at a time: dead reckoning
             // with a drifting bias over a longer unseen stretch can start LM
             // in the wrong basin.
@@ -470,12 +548,14 @@ impl Reconstruction {
                 }
                 self.window = next;
                 self.widened = true;
+                self.stage_iterations = 0;
                 self.lm = LmState::new(self.settings.damping);
                 return Some(self.report(phase, outcome, false));
             }
         }
-        let finished = outcome.converged || self.phase_iterations[slot] >= self.settings.max_iter;
+        let finished = stage_done;
         if finished {
+            self.stage_iterations = 0;
             self.phase = match phase {
                 Phase::Step1 if self.has_segments() => Phase::Step2,
                 _ => Phase::Done,
@@ -487,6 +567,14 @@ impl Reconstruction {
     }
 
     fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
+        // Over the fixes this iteration fitted (in step 1 its window, which the
+        // widening may just have replaced: then over the ride).
+        let rms_horizontal_m = match (outcome.evaluation, &self.window, phase) {
+            (Some(ev), _, _) => FitStats::from_evaluation(&ev),
+            (None, Some(w), Phase::Step1) => FitStats::of(&w.model, &self.theta),
+            (None, _, _) => FitStats::of(&self.model, &self.theta),
+        }
+        .rms_horizontal_m;
         let report = IterationReport {
             iteration: self.iteration,
             phase,
@@ -497,7 +585,7 @@ impl Reconstruction {
             },
             cost: outcome.cost,
             accepted: outcome.accepted,
-            rms_horizontal_m: FitStats::of(&self.model, &self.theta).rms_horizontal_m,
+            rms_horizontal_m,
             damping: self.lm.lambda,
             step_size: self.gd.gamma,
             settings_changed: std::mem::take(&mut self.settings_changed),
@@ -541,6 +629,7 @@ impl Reconstruction {
         if new.step_size != self.settings.step_size || new.method != self.settings.method {
             self.gd = GdState::new(new.step_size);
         }
+        self.stage_iterations = 0;
         if effects_changed {
             self.phase = Phase::Step1;
             self.phase_iterations = [0, 0];
