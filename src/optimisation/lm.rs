@@ -71,14 +71,14 @@ pub fn damped_solve(a: &DMatrix<f64>, b: &DVector<f64>, lambda: f64) -> Option<D
 /// The damped Gauss-Newton problem of one iteration: in chain form (O(N)) when
 /// the model allows it, else the dense normal equations.
 enum LinearSystem {
-    Chain(ChainSystem),
+    Chain(Box<ChainSystem>),
     Dense(NormalEquations),
 }
 
 impl LinearSystem {
     fn of(model: &Model, theta: &[f64], free: &[bool]) -> Self {
         match model.chain_system(theta, free) {
-            Some(c) => Self::Chain(c),
+            Some(c) => Self::Chain(Box::new(c)),
             None => Self::Dense(model.normal_equations(theta, free)),
         }
     }
