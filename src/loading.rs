@@ -6,6 +6,7 @@
 //! loaded from a bad file.
 
 use std::collections::BTreeMap;
+use std::io::{BufRead, Read};
 use std::path::{Path, PathBuf};
 
 use thiserror::Error;
@@ -61,6 +62,27 @@ pub struct RideLog {
 }
 
 impl RideLog {
+    /// Give back the columns' growth slack (up to half of a long log's
+    /// memory) before the signals are derived from them.
+    fn shrink_to_fit(&mut self) {
+        self.line.shrink_to_fit();
+        self.t_s.shrink_to_fit();
+        self.gyro_dps.shrink_to_fit();
+        self.fix.shrink_to_fit();
+        for c in [&mut self.odo_m, &mut self.gps_alt_m, &mut self.baro_alt_m]
+            .into_iter()
+            .flatten()
+        {
+            c.shrink_to_fit();
+        }
+        if let Some(p) = &mut self.wheel_pulse {
+            p.shrink_to_fit();
+        }
+        for (_, c) in &mut self.channels {
+            c.shrink_to_fit();
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.t_s.len()
     }
@@ -79,11 +101,14 @@ impl RideLog {
 
 /// Load a ride log from a file.
 pub fn load_file(path: &Path) -> Result<RideLog, LoadError> {
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+    let file = std::fs::File::open(path).map_err(|source| LoadError::Io {
         file: path.display().to_string(),
         source,
     })?;
-    parse(&bytes, &path.display().to_string())
+    parse_reader(
+        std::io::BufReader::with_capacity(1 << 20, file),
+        &path.display().to_string(),
+    )
 }
 
 /// Load a ride log from a path given as a string (convenience for callers).
@@ -123,6 +148,12 @@ fn known(name: &str) -> Option<Known> {
 
 /// Parse a ride log held in memory; `source` names it in messages.
 pub fn parse(bytes: &[u8], source: &str) -> Result<RideLog, LoadError> {
+    parse_reader(bytes, source)
+}
+
+/// Parse a ride log read from `input` (streamed: a large file is never held
+/// in memory as text); `source` names it in errors.
+pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, LoadError> {
     let file = source.to_string();
     let field_err = |line: u64, column: &str, message: String| LoadError::Field {
         file: file.clone(),
@@ -133,49 +164,60 @@ pub fn parse(bytes: &[u8], source: &str) -> Result<RideLog, LoadError> {
 
     // Leading comment lines: metadata.
     let mut metadata = BTreeMap::new();
-    let mut offset = 0usize;
     let mut comment_lines = 0u64;
-    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
-    while offset < bytes.len() {
-        let end = bytes[offset..]
-            .iter()
-            .position(|&b| b == b'\n')
-            .map_or(bytes.len(), |e| offset + e + 1);
-        let line = &bytes[offset..end];
-        let trimmed = line.trim_ascii();
-        if trimmed.is_empty() || trimmed[0] == b'#' {
-            if let Some(body) = trimmed.strip_prefix(b"#") {
-                let body = std::str::from_utf8(body).map_err(|_| LoadError::Line {
-                    file: file.clone(),
-                    line: comment_lines + 1,
-                    message: "comment is not valid UTF-8".into(),
-                })?;
-                if let Some((k, v)) = body.split_once(':') {
-                    let key = k.trim();
-                    if !key.is_empty() && !key.contains(' ') {
-                        metadata.insert(key.to_string(), v.trim().to_string());
-                    }
-                }
-            }
-            comment_lines += 1;
-            offset = end;
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        let read = input
+            .read_until(b'\n', &mut line)
+            .map_err(|e| LoadError::Line {
+                file: file.clone(),
+                line: comment_lines + 1,
+                message: format!("cannot read: {e}"),
+            })?;
+        if read == 0 {
+            return Err(LoadError::File {
+                file,
+                message: "no header row (the file holds no data)".into(),
+            });
+        }
+        let text = if comment_lines == 0 {
+            line.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(&line)
         } else {
+            &line[..]
+        };
+        let trimmed = text.trim_ascii();
+        if !trimmed.is_empty() && trimmed[0] != b'#' {
             break;
         }
+        if let Some(body) = trimmed.strip_prefix(b"#") {
+            let body = std::str::from_utf8(body).map_err(|_| LoadError::Line {
+                file: file.clone(),
+                line: comment_lines + 1,
+                message: "comment is not valid UTF-8".into(),
+            })?;
+            if let Some((k, v)) = body.split_once(':') {
+                let key = k.trim();
+                if !key.is_empty() && !key.contains(' ') {
+                    metadata.insert(key.to_string(), v.trim().to_string());
+                }
+            }
+        }
+        comment_lines += 1;
     }
-    let body = &bytes[offset..];
-    if body.trim_ascii().is_empty() {
-        return Err(LoadError::File {
-            file,
-            message: "no header row (the file holds no data)".into(),
-        });
-    }
+    // The header line just read, then the rest of the input.
+    let header = if comment_lines == 0 {
+        line.strip_prefix(b"\xEF\xBB\xBF")
+            .map_or(line.clone(), <[u8]>::to_vec)
+    } else {
+        line
+    };
 
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(true)
         .flexible(false)
         .trim(csv::Trim::All)
-        .from_reader(body);
+        .from_reader(std::io::Cursor::new(header).chain(input));
     let header_line = comment_lines + 1;
     let headers = reader
         .byte_headers()
@@ -449,6 +491,7 @@ pub fn parse(bytes: &[u8], source: &str) -> Result<RideLog, LoadError> {
                 .push((columns[c].0.clone(), std::mem::take(&mut extra_values[k])));
         }
     }
+    log.shrink_to_fit();
     Ok(log)
 }
 
