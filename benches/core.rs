@@ -2,6 +2,7 @@
 //! `cargo bench --bench core`; numbers are in the README.
 
 use std::hint::black_box;
+
 use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};

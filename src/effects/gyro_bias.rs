@@ -45,11 +45,15 @@ impl Effect for GyroBias {
         GyroPartials::bias(0)
     }
 
-    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+    fn gyro_batch(&self, p: &[f64], _first: usize, rates: &mut [Vector3<f64>]) {
         let b = Vector3::new(p[0], p[1], p[2]);
-        for w in rates.iter_mut().skip(1) {
+        for w in rates.iter_mut() {
             *w -= b;
         }
+    }
+
+    fn gyro_backward_reads_input(&self) -> bool {
+        false
     }
 
     fn gyro_backward(

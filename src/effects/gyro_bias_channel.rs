@@ -90,11 +90,15 @@ impl Effect for GyroBiasChannel {
         part
     }
 
-    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+    fn gyro_batch(&self, p: &[f64], first: usize, rates: &mut [Vector3<f64>]) {
         let k = Vector3::new(p[0], p[1], p[2]);
-        for (w, &c) in rates.iter_mut().zip(&self.centred).skip(1) {
+        for (w, &c) in rates.iter_mut().zip(&self.centred[first..]) {
             *w -= k * c;
         }
+    }
+
+    fn gyro_backward_reads_input(&self) -> bool {
+        false
     }
 
     fn gyro_backward(

@@ -134,11 +134,15 @@ impl Effect for GyroBiasSegments {
         GyroPartials::bias(3 * self.segment_of[j] as usize)
     }
 
-    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
-        for (w, &s) in rates.iter_mut().zip(&self.segment_of).skip(1) {
+    fn gyro_batch(&self, p: &[f64], first: usize, rates: &mut [Vector3<f64>]) {
+        for (w, &s) in rates.iter_mut().zip(&self.segment_of[first..]) {
             let s = 3 * s as usize;
             *w -= Vector3::new(p[s], p[s + 1], p[s + 2]);
         }
+    }
+
+    fn gyro_backward_reads_input(&self) -> bool {
+        false
     }
 
     fn gyro_backward(

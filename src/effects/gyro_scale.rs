@@ -80,7 +80,7 @@ impl Effect for GyroScale {
         GyroPartials { d_in, params }
     }
 
-    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
+    fn gyro_batch(&self, p: &[f64], _first: usize, rates: &mut [Vector3<f64>]) {
         let k = Vector3::new(1.0 / (1.0 + p[0]), 1.0 / (1.0 + p[1]), 1.0 / (1.0 + p[2]));
         for w in rates.iter_mut() {
             *w = w.component_mul(&k);

@@ -196,12 +196,18 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         }
     }
 
-    /// [`gyro`](Effect::gyro) over every step at once (`rates[j]` in, corrected out).
-    /// Override with a tight loop where it matters: the cost sweep calls it once per evaluation.
-    fn gyro_batch(&self, p: &[f64], rates: &mut [Vector3<f64>]) {
-        for (j, w) in rates.iter_mut().enumerate() {
-            *w = self.gyro(p, j, *w);
+    /// [`gyro`](Effect::gyro) over a run of steps at once: `rates[k]` (row
+    /// `first + k`) in, corrected out. Override with a tight loop where it
+    /// matters: the cost sweep calls it on every chunk of every evaluation.
+    fn gyro_batch(&self, p: &[f64], first: usize, rates: &mut [Vector3<f64>]) {
+        for (k, w) in rates.iter_mut().enumerate() {
+            *w = self.gyro(p, first + k, *w);
         }
+    }
+    /// Whether [`gyro_backward`](Effect::gyro_backward) reads the input rates
+    /// (an additive bias does not, so the gradient need not keep a copy of them).
+    fn gyro_backward_reads_input(&self) -> bool {
+        true
     }
     /// Back-propagate through the gyro site over every step: `grad[j]` holds
     /// `dC/d omega_out` and becomes `dC/d omega_in`; parameter gradients are added to `grad_p`.
@@ -234,10 +240,10 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         }
     }
 
-    /// [`distance`](Effect::distance) over every step at once.
-    fn distance_batch(&self, p: &[f64], d: &mut [f64]) {
-        for (j, x) in d.iter_mut().enumerate() {
-            *x = self.distance(p, j, *x);
+    /// [`distance`](Effect::distance) over a run of steps at once (`d[k]` is row `first + k`).
+    fn distance_batch(&self, p: &[f64], first: usize, d: &mut [f64]) {
+        for (k, x) in d.iter_mut().enumerate() {
+            *x = self.distance(p, first + k, *x);
         }
     }
     /// Back-propagate through the distance site (see [`gyro_backward`](Effect::gyro_backward)).
@@ -458,7 +464,17 @@ pub(crate) mod testing {
             .map(|j| Vector3::new(0.1, -0.2, 0.3) * (j as f64 * 0.01).sin())
             .collect();
         let mut batch = rates.clone();
-        effect.gyro_batch(p, &mut batch);
+        effect.gyro_batch(p, 0, &mut batch);
+        // A run that starts later (a chunk of the parallel sweep) gives the same rows.
+        let from = n / 3;
+        let mut tail = rates[from..].to_vec();
+        effect.gyro_batch(p, from, &mut tail);
+        for (k, w) in tail.iter().enumerate() {
+            assert!(
+                (w - batch[from + k]).norm() < 1e-15,
+                "batch from {from} at {k}"
+            );
+        }
         let mut grad: Vec<Vector3<f64>> = (0..n)
             .map(|j| Vector3::new(1.0, 2.0, -1.0) * (j as f64 * 0.03).cos())
             .collect();

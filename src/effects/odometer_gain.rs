@@ -36,7 +36,7 @@ impl Effect for OdometerGain {
         DistancePartials { d_in: p[0], params }
     }
 
-    fn distance_batch(&self, p: &[f64], d: &mut [f64]) {
+    fn distance_batch(&self, p: &[f64], _first: usize, d: &mut [f64]) {
         for x in d.iter_mut() {
             *x *= p[0];
         }

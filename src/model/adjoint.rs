@@ -33,11 +33,13 @@ impl Model {
         // from them and the back-propagation below needs the stage inputs.
         let (rates, rate_inputs) = self.corrected_rates(theta, 0, true);
         let (dist, dist_inputs) = self.corrected_distances(theta, 0, true);
-        let path = self.trajectory_corrected(theta, &rates, &dist);
+        let plan = self.obs_plan(theta);
+        let (q0, p0, _) = self.initial_state(theta);
+        // Attitude at every row, positions where the observations look.
+        let path = self.forward(theta, 0, (q0, p0), Some((&rates, &dist)), &plan.row, true);
         let sig = &self.signals;
         let n = self.horizon();
         let mut grad = vec![0.0; self.n_params()];
-        let plan = self.obs_plan(theta);
         let (f, f_parts) = self.forward_axis(theta);
         let obs = &self.observations;
         let mut cost = 0.0;
@@ -59,11 +61,11 @@ impl Model {
                         cost: &mut f64,
                         grad: &mut [f64]| {
             *a += std::mem::take(pending);
-            let delta = path.p[row] - path.p[row.max(1) - 1];
             while *k > 0 && plan.row[*k - 1] == row {
                 *k -= 1;
                 let o = &obs[*k];
-                let v = plan.value(*k, o, plan.x(*k, o.axis, &path.p[row], &delta));
+                let delta = path.delta[*k];
+                let v = plan.value(*k, o, plan.x(*k, o.axis, &path.p[*k], &delta));
                 *cost += v.r * v.r;
                 let g = 2.0 * v.r * v.slope;
                 let beta = plan.beta[*k];
@@ -73,18 +75,23 @@ impl Model {
             }
         };
 
-        for j in (1..n).rev() {
+        for (j, q) in path.attitudes_rev() {
             take_row(j, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
-            let rot = path.q[j].to_rotation_matrix();
+            let th = rates[j] * sig.dt[j];
+            let rot = q.to_rotation_matrix();
             let dir = rot * f;
-            b += (dir * path.d[j]).cross(&a);
+            let d = dist[j];
+            b += (dir * d).cross(&a);
             // d C / d omega_j = dt_j J_j^T R_j^T B_j.
-            let jr = self.spec.increment.right_jacobian(&path.theta[j]);
-            g_rate[j] = jr.transpose() * (rot.transpose() * b) * sig.dt[j];
+            g_rate[j] = self
+                .spec
+                .increment
+                .right_jacobian_transpose_mul(&th, &(rot.transpose() * b))
+                * sig.dt[j];
             g_dist[j] = a.dot(&dir);
             // d Delta_j / d m = R_j (d f / d m) d_j for the forward-axis parameters.
             for &(i, df) in &f_parts {
-                grad[i] += a.dot(&(rot * df)) * path.d[j];
+                grad[i] += a.dot(&(rot * df)) * d;
             }
         }
         take_row(0, &mut a, &mut pending, &mut k, &mut cost, &mut grad);

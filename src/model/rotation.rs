@@ -38,6 +38,26 @@ impl Increment {
         }
     }
 
+    /// `J^T v` without forming `J`: for the exponential map
+    /// `J_r^T v = v + a theta x v + b theta x (theta x v)` (the coefficients of
+    /// [`right_jacobian`], `[theta]x^T = -[theta]x`). The adjoint sweep needs
+    /// it at every step.
+    #[inline]
+    pub fn right_jacobian_transpose_mul(
+        self,
+        theta: &Vector3<f64>,
+        v: &Vector3<f64>,
+    ) -> Vector3<f64> {
+        match self {
+            Increment::Exact => {
+                let (a, b) = right_jacobian_coefficients(theta.norm_squared());
+                let tv = theta.cross(v);
+                v + tv * a + theta.cross(&tv) * b
+            }
+            Increment::SmallAngle => self.right_jacobian(theta).transpose() * v,
+        }
+    }
+
     /// `J` with `g(theta + d) = g(theta) Exp(J d) + O(d^2)`.
     ///
     /// Exact map: the right Jacobian of SO(3). Small-angle map: `[1, theta/2]`
@@ -102,8 +122,15 @@ pub fn skew(a: &Vector3<f64>) -> Matrix3<f64> {
 /// `J_r = I - (1 - cos n)/n^2 [phi]x + (n - sin n)/n^3 [phi]x^2`.
 #[inline]
 pub fn right_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
-    let n2 = phi.norm_squared();
-    let (a, b) = if n2 < 1e-2 {
+    let (a, b) = right_jacobian_coefficients(phi.norm_squared());
+    let k = skew(phi);
+    Matrix3::identity() - k * a + k * k * b
+}
+
+/// `((1 - cos n)/n^2, (n - sin n)/n^3)` for `n^2 = n2`, by Taylor series for small angles.
+#[inline]
+fn right_jacobian_coefficients(n2: f64) -> (f64, f64) {
+    if n2 < 1e-2 {
         (
             0.5 - n2 / 24.0 + n2 * n2 / 720.0 - n2 * n2 * n2 / 40320.0,
             1.0 / 6.0 - n2 / 120.0 + n2 * n2 / 5040.0 - n2 * n2 * n2 / 362_880.0,
@@ -111,9 +138,7 @@ pub fn right_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
     } else {
         let n = n2.sqrt();
         ((1.0 - n.cos()) / n2, (n - n.sin()) / (n2 * n))
-    };
-    let k = skew(phi);
-    Matrix3::identity() - k * a + k * k * b
+    }
 }
 
 /// Left Jacobian of SO(3): `Exp(phi + d) = Exp(J_l(phi) d) Exp(phi) + O(d^2)`.

@@ -2,8 +2,38 @@
 //! then residuals and cost at the GPS rows. One pass, O(N).
 
 use nalgebra::{UnitQuaternion, Vector3};
+use rayon::prelude::*;
 
 use super::Model;
+
+/// Rows per chunk of the parallel forward sweep (and at most this many chunks):
+/// a 30-minute ride at 100 Hz is two chunks, one per core of a small machine.
+/// The split depends only on the ride, so results do not depend on the machine.
+/// Unit tests use short chunks so that their short rides exercise the chaining.
+pub(crate) const CHUNK_ROWS: usize = if cfg!(test) { 500 } else { 90_000 };
+const MAX_CHUNKS: usize = 64;
+
+impl Forward {
+    /// `(j, q_j)` for every kept row, last row first (for the adjoint sweep).
+    pub fn attitudes_rev(&self) -> impl Iterator<Item = (usize, UnitQuaternion<f64>)> + '_ {
+        self.chunks.iter().rev().flat_map(|(qa, from, qs)| {
+            qs.iter()
+                .enumerate()
+                .rev()
+                .map(move |(i, r)| (from + i, qa * r))
+        })
+    }
+}
+
+/// The path where the observations look, from one forward sweep.
+pub(crate) struct Forward {
+    /// Attitudes (if kept) per chunk: the chunk's start attitude `q_a`, its
+    /// first row, and `r_j` of each of its rows (`q_j = q_a r_j`).
+    pub chunks: Vec<(UnitQuaternion<f64>, usize, Vec<UnitQuaternion<f64>>)>,
+    /// Position at each observation's row and the step `Delta` that led there.
+    pub p: Vec<Vector3<f64>>,
+    pub delta: Vec<Vector3<f64>>,
+}
 
 /// The reconstructed path for one parameter vector.
 #[derive(Clone, Debug, Default)]
@@ -20,7 +50,7 @@ pub struct Trajectory {
 
 impl Model {
     /// Corrected rates (rad/s) of every step: the gyro chain applied in batch.
-    /// With `keep_inputs`, also the input of every gyro effect (for back-propagation).
+    /// With `keep_inputs`, also the input of every gyro effect whose backward pass reads it (empty for the others).
     /// Rows before `first` are left out (`rates[j - first]` is row `j`'s).
     pub(crate) fn corrected_rates(
         &self,
@@ -32,16 +62,13 @@ impl Model {
         let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
             if keep_inputs {
-                inputs.push(rates.clone());
+                inputs.push(if self.effects[e].gyro_backward_reads_input() {
+                    rates.clone()
+                } else {
+                    Vec::new()
+                });
             }
-            let p = self.params_of(e, theta);
-            if first == 0 {
-                self.effects[e].gyro_batch(p, &mut rates);
-            } else {
-                for (k, w) in rates.iter_mut().enumerate() {
-                    *w = self.effects[e].gyro(p, first + k, *w);
-                }
-            }
+            self.effects[e].gyro_batch(self.params_of(e, theta), first, &mut rates);
         }
         (rates, inputs)
     }
@@ -59,14 +86,7 @@ impl Model {
             if keep_inputs {
                 inputs.push(d.clone());
             }
-            let p = self.params_of(e, theta);
-            if first == 0 {
-                self.effects[e].distance_batch(p, &mut d);
-            } else {
-                for (k, x) in d.iter_mut().enumerate() {
-                    *x = self.effects[e].distance(p, first + k, *x);
-                }
-            }
+            self.effects[e].distance_batch(self.params_of(e, theta), first, &mut d);
         }
         (d, inputs)
     }
@@ -113,6 +133,107 @@ impl Model {
             let d = dist[j - first];
             p += q * (f * d);
             visit(j, &q, &p, &th, d);
+        }
+    }
+
+    /// Corrected rates and distances of rows `from..to`.
+    fn corrected_run(
+        &self,
+        theta: &[f64],
+        from: usize,
+        to: usize,
+    ) -> (Vec<Vector3<f64>>, Vec<f64>) {
+        let sig = &self.signals;
+        let mut rates = sig.gyro[from..to].to_vec();
+        for &e in &self.gyro_chain {
+            self.effects[e].gyro_batch(self.params_of(e, theta), from, &mut rates);
+        }
+        let mut dist = sig.distance[from..to].to_vec();
+        for &e in &self.distance_chain {
+            self.effects[e].distance_batch(self.params_of(e, theta), from, &mut dist);
+        }
+        (rates, dist)
+    }
+
+    /// Eq. 1-4 from row `first` (state `q0`, `p0`) in parallel: the rows are
+    /// cut into chunks, each integrated from the identity (`q = q_a r_j`,
+    /// `p = p_a + q_a s_j` with `r_j`, `s_j` the chunk's own attitude and
+    /// position), and the chunks' end states chained afterwards. Positions are
+    /// kept only where the observations of `rows` (non-decreasing) look;
+    /// attitudes at every row if `keep_q`. The corrected rates and distances
+    /// (`[k]` for row `first + k`) are given, or made chunk by chunk.
+    pub(crate) fn forward(
+        &self,
+        theta: &[f64],
+        first: usize,
+        (q0, p0): (UnitQuaternion<f64>, Vector3<f64>),
+        corrected: Option<(&[Vector3<f64>], &[f64])>,
+        rows: &[usize],
+        keep_q: bool,
+    ) -> Forward {
+        let sig = &self.signals;
+        let (f, _) = self.forward_axis(theta);
+        let inc = self.spec.increment;
+        let steps = self.horizon().saturating_sub(first + 1);
+        let k = (steps / CHUNK_ROWS).clamp(1, MAX_CHUNKS);
+        let bounds: Vec<usize> = (0..=k).map(|c| first + steps * c / k).collect();
+        let chunks: Vec<_> = (0..k)
+            .into_par_iter()
+            .map(|c| {
+                let (a, b) = (bounds[c], bounds[c + 1]);
+                let o1 = rows.partition_point(|&r| r <= b);
+                let mut o = rows.partition_point(|&r| r <= a);
+                let mut r = UnitQuaternion::identity();
+                let mut s = Vector3::zeros();
+                let mut ps = Vec::with_capacity(o1 - o);
+                let mut ds = Vec::with_capacity(o1 - o);
+                let mut qs = Vec::with_capacity(if keep_q { b - a } else { 0 });
+                // This chunk's corrected signals, from row a + 1 on.
+                let own;
+                let (rates, dist) = match corrected {
+                    Some((w, d)) => (&w[a + 1 - first..], &d[a + 1 - first..]),
+                    None => {
+                        own = self.corrected_run(theta, a + 1, b + 1);
+                        (&own.0[..], &own.1[..])
+                    }
+                };
+                for j in a + 1..=b {
+                    r *= inc.quaternion(&(rates[j - a - 1] * sig.dt[j]));
+                    let delta = r * (f * dist[j - a - 1]);
+                    s += delta;
+                    if keep_q {
+                        qs.push(r);
+                    }
+                    while o < o1 && rows[o] == j {
+                        ps.push(s);
+                        ds.push(delta);
+                        o += 1;
+                    }
+                }
+                (r, s, ps, ds, qs)
+            })
+            .collect();
+        // Chain the chunks: each starts where the previous one ended.
+        let at_first = rows.partition_point(|&r| r <= first);
+        let mut p = vec![p0; at_first];
+        let mut delta = vec![Vector3::zeros(); at_first];
+        p.reserve(rows.len() - at_first);
+        delta.reserve(rows.len() - at_first);
+        let mut attitudes = Vec::with_capacity(k);
+        let (mut qa, mut pa) = (q0, p0);
+        for (c, (r, s, ps, ds, qs)) in chunks.into_iter().enumerate() {
+            p.extend(ps.iter().map(|x| pa + qa * x));
+            delta.extend(ds.iter().map(|x| qa * x));
+            if keep_q {
+                attitudes.push((qa, bounds[c] + 1, qs));
+            }
+            pa += qa * s;
+            qa *= r;
+        }
+        Forward {
+            chunks: attitudes,
+            p,
+            delta,
         }
     }
 
@@ -189,27 +310,28 @@ impl Model {
     pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
         let plan = self.obs_plan(theta);
         let obs = &self.observations;
-        let mut k = 0;
-        let mut ev = Evaluation::default();
-        let mut prev = Vector3::zeros();
-        self.sweep(theta, |j, _, p, _, _| {
-            let delta = p - prev;
-            prev = *p;
-            while k < obs.len() && plan.row[k] == j {
-                let o = &obs[k];
-                let v = plan.value(k, o, plan.x(k, o.axis, p, &delta));
-                let metres = v.metres;
-                ev.cost += v.r * v.r;
-                let slot = match (o.axis, o.baro) {
-                    (2, true) => 2,
-                    (2, false) => 1,
-                    _ => 0,
-                };
-                ev.sum_sq_m[slot] += metres * metres;
-                ev.count[slot] += 1;
-                k += 1;
+        let anchor = self.anchor_for(theta);
+        let first = anchor.map_or(0, |a| a.row);
+        let start = match anchor {
+            Some(a) => (a.q, a.p),
+            None => {
+                let (q, p, _) = self.initial_state(theta);
+                (q, p)
             }
-        });
+        };
+        let fw = self.forward(theta, first, start, None, &plan.row, false);
+        let mut ev = Evaluation::default();
+        for (k, o) in obs.iter().enumerate() {
+            let v = plan.value(k, o, plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
+            ev.cost += v.r * v.r;
+            let slot = match (o.axis, o.baro) {
+                (2, true) => 2,
+                (2, false) => 1,
+                _ => 0,
+            };
+            ev.sum_sq_m[slot] += v.metres * v.metres;
+            ev.count[slot] += 1;
+        }
         ev.cost += self
             .prior_rows(theta)
             .residuals

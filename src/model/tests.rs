@@ -188,7 +188,18 @@ fn chain_solver_gives_the_dense_lm_step() {
     for i in window.range(seg).skip(18) {
         window_free[i] = false;
     }
-    let mut cases: Vec<(Model, Vec<bool>)> = vec![(window, window_free)];
+    // An anchored window: only the segments after the anchor are free.
+    let anchor_row = 2100;
+    let anchored = full
+        .window(&perturbed(&full), anchor_row, full.signals.t[0] + 50.0)
+        .unwrap();
+    let mut anchored_free = vec![false; anchored.n_params()];
+    let effect = &anchored.effects()[seg];
+    for (k, i) in anchored.range(seg).enumerate() {
+        anchored_free[i] = effect.param_steps(k).is_some_and(|(f, _)| f > anchor_row);
+    }
+    assert!(anchored.anchor_holds(&anchored_free));
+    let mut cases: Vec<(Model, Vec<bool>)> = vec![(window, window_free), (anchored, anchored_free)];
     for m in [
         model(Increment::Exact, None),
         model(Increment::SmallAngle, Some(0.01)),
@@ -220,5 +231,44 @@ fn chain_solver_gives_the_dense_lm_step() {
                 "{fast_predicted} vs {predicted}"
             );
         }
+    }
+}
+
+#[test]
+fn chunked_parallel_sweep_equals_the_sequential_path() {
+    for m in [catalogue_model(), model(Increment::SmallAngle, Some(0.01))] {
+        let p = perturbed(&m);
+        assert!(m.signals.len() > 4 * super::sweep::CHUNK_ROWS);
+        let sequential: f64 = m.residuals(&p).iter().map(|r| r * r).sum();
+        let chunked = m.cost(&p);
+        assert!(
+            (chunked - sequential).abs() < 1e-10 * sequential,
+            "{chunked} vs {sequential}"
+        );
+        // A window anchored part-way gives the same cost as its unanchored twin.
+        let t_end = m.signals.t[0] + 50.0;
+        let anchored = m.window(&p, 2600, t_end).unwrap();
+        let mut plain = m.restricted(t_end).unwrap();
+        plain.observations.retain(|o| o.row > 2600);
+        let (a, b) = (anchored.cost(&p), plain.cost(&p));
+        assert!((a - b).abs() < 1e-10 * b, "anchored {a} vs {b}");
+        // Its Jacobian in the segments after the anchor is the twin's.
+        let seg = m.effect_index("gyro_bias_segments").unwrap();
+        let effect = &m.effects()[seg];
+        let mut free = vec![false; m.n_params()];
+        for (k, i) in m.range(seg).enumerate() {
+            free[i] = effect.param_steps(k).is_some_and(|(f, _)| f > 2600);
+        }
+        let (ja, jb) = (anchored.linearise(&p, &free), plain.linearise(&p, &free));
+        let scale = jb.jacobian.amax();
+        assert!((&ja.jacobian - &jb.jacobian).amax() < 1e-9 * scale);
+        assert!((&ja.residuals - &jb.residuals).amax() < 1e-9 * jb.residuals.amax());
+        // Changing a parameter that acts before the anchor invalidates it.
+        let mut q = p.clone();
+        q[anchored
+            .range(anchored.effect_index("odometer_gain").unwrap())
+            .start] += 1e-3;
+        let (a, b) = (anchored.cost(&q), plain.cost(&q));
+        assert!((a - b).abs() < 1e-10 * b, "stale anchor {a} vs {b}");
     }
 }
