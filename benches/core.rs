@@ -44,8 +44,12 @@ fn bench(c: &mut Criterion) {
             b.iter(|| model.gradient(black_box(&theta)))
         });
         let free = vec![true; model.n_params()];
-        g.bench_function(format!("normal_equations/{label}"), |b| {
-            b.iter(|| model.normal_equations(black_box(&theta), &free))
+        // One LM step: linearise in chain form and solve the damped problem (O(N)).
+        g.bench_function(format!("lm_step/{label}"), |b| {
+            b.iter(|| {
+                let chain = model.chain_system(black_box(&theta), &free).unwrap();
+                chain.solve(1e-3).unwrap()
+            })
         });
         g.bench_function(format!("fit/{label}"), |b| {
             b.iter(|| {

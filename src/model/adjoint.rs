@@ -75,24 +75,40 @@ impl Model {
             }
         };
 
-        for (j, q) in path.attitudes_rev() {
-            take_row(j, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
-            let th = rates[j] * sig.dt[j];
-            let rot = q.to_rotation_matrix();
-            let dir = rot * f;
-            let d = dist[j];
-            b += (dir * d).cross(&a);
-            // d C / d omega_j = dt_j J_j^T R_j^T B_j.
-            g_rate[j] = self
-                .spec
-                .increment
-                .right_jacobian_transpose_mul(&th, &(rot.transpose() * b))
-                * sig.dt[j];
-            g_dist[j] = a.dot(&dir);
-            // d Delta_j / d m = R_j (d f / d m) d_j for the forward-axis parameters.
-            for &(i, df) in &f_parts {
-                grad[i] += a.dot(&(rot * df)) * d;
+        // Chunk by chunk, last first, in the chunk's own frame: with
+        // q_j = q_a r_j, `A' = q_a^-1 A` and `B' = q_a^-1 B` follow the same
+        // recursion with the relative attitudes r_j (rotations keep cross and
+        // dot products), so no row needs q_a r_j.
+        for (qa, from, rs) in path.chunks.iter().rev() {
+            let to_chunk = qa.inverse();
+            let mut a_rel = to_chunk * a;
+            let mut b_rel = to_chunk * b;
+            for (i, r) in rs.iter().enumerate().rev() {
+                let j = from + i;
+                if pending != Vector3::zeros() || (k > 0 && plan.row[k - 1] == j) {
+                    let mut add = Vector3::zeros();
+                    take_row(j, &mut add, &mut pending, &mut k, &mut cost, &mut grad);
+                    a_rel += to_chunk * add;
+                }
+                let th = rates[j] * sig.dt[j];
+                let rot = r.to_rotation_matrix();
+                let dir = rot * f;
+                let d = dist[j];
+                b_rel += (dir * d).cross(&a_rel);
+                // d C / d omega_j = dt_j J_j^T R_j^T B_j.
+                g_rate[j] = self
+                    .spec
+                    .increment
+                    .right_jacobian_transpose_mul(&th, &(rot.transpose() * b_rel))
+                    * sig.dt[j];
+                g_dist[j] = a_rel.dot(&dir);
+                // d Delta_j / d m = R_j (d f / d m) d_j for the forward-axis parameters.
+                for &(i, df) in &f_parts {
+                    grad[i] += a_rel.dot(&(rot * df)) * d;
+                }
             }
+            a = qa * a_rel;
+            b = qa * b_rel;
         }
         take_row(0, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
         for (i, &e) in self.gyro_chain.iter().enumerate().rev() {

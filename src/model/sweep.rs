@@ -13,18 +13,6 @@ use super::Model;
 pub(crate) const CHUNK_ROWS: usize = if cfg!(test) { 500 } else { 90_000 };
 const MAX_CHUNKS: usize = 64;
 
-impl Forward {
-    /// `(j, q_j)` for every kept row, last row first (for the adjoint sweep).
-    pub fn attitudes_rev(&self) -> impl Iterator<Item = (usize, UnitQuaternion<f64>)> + '_ {
-        self.chunks.iter().rev().flat_map(|(qa, from, qs)| {
-            qs.iter()
-                .enumerate()
-                .rev()
-                .map(move |(i, r)| (from + i, qa * r))
-        })
-    }
-}
-
 /// The path where the observations look, from one forward sweep.
 pub(crate) struct Forward {
     /// Attitudes (if kept) per chunk: the chunk's start attitude `q_a`, its
