@@ -136,6 +136,8 @@ fn settings_change_between_iterations_without_starting_over() {
 /// A one-hour ride: a constant bias fitted to the whole hour from the start
 /// guess used to settle 557 m off (step 1 in a wrong basin, step 2 never
 /// recovered); step 1's growing window keeps it in the right one.
+/// Past 15 minutes step 1's windows are anchored (they fit only their last
+/// stretch): an hour exercises many of them and the final full-ride LM.
 #[test]
 fn an_hour_long_ride_converges_to_the_gps() {
     let (sim, sig) = common::ride(3, 3600.0, &[]);

@@ -174,7 +174,7 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
                 .map(|r| [r.iteration as f64, r.rms_horizontal_m.log10()])
                 .collect();
             plot.line(
-                Line::new("GPS RMS (m), whole ride", rms)
+                Line::new("GPS RMS (m), fixes fitted (step 1: its window)", rms)
                     .color(GPS)
                     .width(1.5),
             );
