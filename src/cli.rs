@@ -582,5 +582,13 @@ fn print_diagnosis(d: &Diagnosis) {
         println!(
             "nothing significant: no catalogue effect lowers the held-out error beyond chance"
         );
+        if let Some(best) = d.ranking.first().filter(|c| c.drop >= 0.02) {
+            println!(
+                "best:     {} ({:.1} % lower held-out error) - {}",
+                best.effect,
+                100.0 * best.drop,
+                best.explanation
+            );
+        }
     }
 }
