@@ -206,7 +206,7 @@ impl SettingsArgs {
 /// Load a log and derive its signals.
 pub fn load_signals(path: &Path) -> Result<Signals> {
     let log = loading::load_file(path)?;
-    Ok(Signals::from_log(&log)?)
+    Ok(Signals::from_owned_log(log)?)
 }
 
 fn phase_name(p: Phase) -> &'static str {

@@ -98,6 +98,18 @@ impl Signals {
 
     /// Derive the signals of a loaded log.
     pub fn from_log(log: &RideLog) -> Result<Self, SignalError> {
+        Self::derive(log, log.gyro_dps.clone())
+    }
+
+    /// Derive the signals of a loaded log, consuming it: its gyro column
+    /// becomes the rates in place (a 6-hour log is not copied).
+    pub fn from_owned_log(mut log: RideLog) -> Result<Self, SignalError> {
+        let gyro_dps = std::mem::take(&mut log.gyro_dps);
+        Self::derive(&log, gyro_dps)
+    }
+
+    /// The signals of `log`, whose gyro column (deg/s) is given apart.
+    fn derive(log: &RideLog, gyro_dps: Vec<[f64; 3]>) -> Result<Self, SignalError> {
         let file = log.source.clone();
         let unusable = |message: String| SignalError::Unusable {
             file: file.clone(),
@@ -112,9 +124,9 @@ impl Signals {
         for j in 1..n {
             dt[j] = t[j] - t[j - 1];
         }
-        let raw: Vec<Vector3<f64>> = log
-            .gyro_dps
-            .iter()
+        // Same size and alignment: the collect reuses the column's memory.
+        let raw: Vec<Vector3<f64>> = gyro_dps
+            .into_iter()
             .map(|g| Vector3::new(g[0], g[1], g[2]) * std::f64::consts::PI / 180.0)
             .collect();
         let instantaneous = match log.metadata.get("gyro_samples").map(|v| v.trim()) {
@@ -126,7 +138,7 @@ impl Signals {
                 )));
             }
         };
-        let (gyro, gaps) = step_rates(&raw, &dt, instantaneous);
+        let (gyro, gaps) = step_rates(raw, &dt, instantaneous);
         let mut warnings = log.warnings.clone();
         if let Some(g) = gaps.longest {
             warnings.push(format!(
@@ -309,7 +321,7 @@ pub struct Gaps {
 /// it held over the whole gap: the trapezoid between the samples either side
 /// is used there whatever the sample kind.
 pub fn step_rates(
-    raw: &[Vector3<f64>],
+    mut rates: Vec<Vector3<f64>>,
     dt: &[f64],
     instantaneous: bool,
 ) -> (Vec<Vector3<f64>>, Gaps) {
@@ -321,20 +333,21 @@ pub fn step_rates(
         limit_s: limit,
         ..Gaps::default()
     };
-    let mut out = raw.to_vec();
-    for j in 1..raw.len() {
+    // In place, last row first, so that row j - 1 is still the raw sample
+    // when row j is averaged with it (a long log is not copied).
+    for j in (1..rates.len()).rev() {
         let gap = dt[j] > limit;
         if gap {
             gaps.count += 1;
-            if gaps.longest.is_none_or(|(_, l)| dt[j] > l) {
+            if gaps.longest.is_none_or(|(_, l)| dt[j] >= l) {
                 gaps.longest = Some((j, dt[j]));
             }
         }
         if gap || instantaneous {
-            out[j] = (raw[j - 1] + raw[j]) * 0.5;
+            rates[j] = (rates[j - 1] + rates[j]) * 0.5;
         }
     }
-    (out, gaps)
+    (rates, gaps)
 }
 
 /// A gap between wheel revolutions longer than this (s) is taken as a stop.
@@ -455,13 +468,13 @@ mod rate_tests {
         let mut dt = vec![0.01; 8];
         dt[0] = 0.0;
         dt[5] = 0.5; // 49 dropped samples
-        let (mean, gaps) = step_rates(&raw, &dt, false);
+        let (mean, gaps) = step_rates(raw.clone(), &dt, false);
         assert_eq!(gaps.count, 1);
         assert_eq!(gaps.longest, Some((5, 0.5)));
         assert!((gaps.limit_s - 0.05).abs() < 1e-12);
         assert_eq!(mean[4].z, 4.0);
         assert_eq!(mean[5].z, 4.5);
-        let (inst, _) = step_rates(&raw, &dt, true);
+        let (inst, _) = step_rates(raw, &dt, true);
         assert_eq!(inst[4].z, 3.5);
         assert_eq!(inst[0].z, 0.0);
     }
@@ -501,5 +514,25 @@ mod rate_tests {
             .insert("gyro_samples".into(), "sometimes".into());
         let err = Signals::from_log(&log).expect_err("bad metadata");
         assert!(err.to_string().contains("gyro_samples"), "{err}");
+    }
+}
+
+#[cfg(test)]
+mod owned_tests {
+    use super::*;
+
+    #[test]
+    fn consuming_the_log_gives_the_same_signals() {
+        let log = crate::testing::winding_log(20.0, 100.0);
+        let (a, b) = (
+            Signals::from_log(&log).unwrap(),
+            Signals::from_owned_log(log).unwrap(),
+        );
+        assert_eq!(a.t, b.t);
+        assert_eq!(a.dt, b.dt);
+        assert_eq!(a.gyro, b.gyro);
+        assert_eq!(a.distance, b.distance);
+        assert_eq!(a.fixes, b.fixes);
+        assert_eq!(a.warnings, b.warnings);
     }
 }

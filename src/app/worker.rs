@@ -283,7 +283,7 @@ impl Worker {
         };
         let signals = match parsed
             .map_err(|e| e.to_string())
-            .and_then(|log| Signals::from_log(&log).map_err(|e| e.to_string()))
+            .and_then(|log| Signals::from_owned_log(log).map_err(|e| e.to_string()))
         {
             Ok(s) => Arc::new(s),
             Err(e) => {
