@@ -154,7 +154,7 @@ pub fn diagnose_fitted(
         folds: *folds,
         excluded_fixes: use_fix.iter().filter(|&&u| !u).count(),
         ranking,
-        estimate: estimates(model, theta, None),
+        estimate: estimates(model, theta, None, &base.fold_params),
         structure: super::structure(model, theta),
     })
 }
@@ -244,7 +244,7 @@ fn candidate(
     let drop = 1.0 - heldout / base_rms;
     let significant = significant(drop, t);
     let e = fit.model().effect_index(id).map(|e| fit.model().range(e));
-    let estimate = estimates(fit.model(), fit.params(), Some(id));
+    let estimate = estimates(fit.model(), fit.params(), Some(id), &ho.fold_params);
     let mut explanation = explain(id, fit.model(), fit.params(), &estimate, e.is_some());
     if !significant && drop >= MIN_DROP && gain_at_ends >= 0.7 {
         explanation.push_str(&format!(
@@ -305,7 +305,18 @@ fn paired_t(base: &[f64], cand: &[f64]) -> f64 {
 /// Values and 1-sigma uncertainties of the global parameters of `only` (or of
 /// every non-segment effect), from the Gauss-Newton covariance
 /// `s^2 (J^T J)^-1` over the parameters step 2 fits, `s^2 = C / (m - n)`.
-fn estimates(model: &Model, theta: &[f64], only: Option<&str>) -> BTreeMap<String, Estimate> {
+///
+/// The reported sigma is the larger of that and the delete-a-fold jackknife
+/// over the validation refits `folds` (`(k-1)/k sum (theta_i - mean)^2`): the
+/// Gauss-Newton covariance takes the GPS errors as independent, while they
+/// are correlated over about a minute and the bias walk can mimic a global
+/// effect, which the spread between refits on different 60 s blocks shows.
+fn estimates(
+    model: &Model,
+    theta: &[f64],
+    only: Option<&str>,
+    folds: &[Vec<f64>],
+) -> BTreeMap<String, Estimate> {
     let free = model.free_mask(&[Role::Global, Role::Segments]);
     let ne = model.normal_equations(theta, &free);
     let m = model.n_residuals() as f64;
@@ -328,6 +339,7 @@ fn estimates(model: &Model, theta: &[f64], only: Option<&str>) -> BTreeMap<Strin
                     damped_solve(&ne.a, &unit, 0.0).map(|x| (x[col] * s2).max(0.0).sqrt())
                 })
                 .unwrap_or(f64::NAN);
+            let sigma = sigma.max(jackknife_sigma(folds, i));
             let key = if only.is_some() {
                 info.name.clone()
             } else {
@@ -344,6 +356,17 @@ fn estimates(model: &Model, theta: &[f64], only: Option<&str>) -> BTreeMap<Strin
         }
     }
     out
+}
+
+/// Delete-a-fold jackknife standard error of parameter `i` (`NaN` with fewer than two folds).
+fn jackknife_sigma(folds: &[Vec<f64>], i: usize) -> f64 {
+    let values: Vec<f64> = folds.iter().filter_map(|p| p.get(i).copied()).collect();
+    let k = values.len() as f64;
+    if values.len() < 2 {
+        return f64::NAN;
+    }
+    let mean = values.iter().sum::<f64>() / k;
+    ((k - 1.0) / k * values.iter().map(|v| (v - mean).powi(2)).sum::<f64>()).sqrt()
 }
 
 /// One sentence of physics for a fitted candidate.
@@ -452,7 +475,21 @@ mod tests {
 
 #[cfg(test)]
 mod end_share_tests {
-    use super::end_share;
+    use super::{end_share, jackknife_sigma};
+
+    #[test]
+    fn jackknife_sigma_is_the_delete_a_fold_standard_error() {
+        let folds = vec![
+            vec![0.0, 1.0],
+            vec![0.0, 2.0],
+            vec![0.0, 3.0],
+            vec![0.0, 4.0],
+        ];
+        // mean 2.5, sum of squares 5, (k-1)/k = 3/4: sqrt(3.75).
+        assert!((jackknife_sigma(&folds, 1) - 3.75f64.sqrt()).abs() < 1e-12);
+        assert_eq!(jackknife_sigma(&folds, 0), 0.0);
+        assert!(jackknife_sigma(&folds[..1], 1).is_nan());
+    }
 
     #[test]
     fn a_gain_made_at_the_ride_start_is_at_the_ends() {

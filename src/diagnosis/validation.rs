@@ -67,6 +67,8 @@ pub struct HeldOut {
     pub blocks: Vec<usize>,
     /// LM iterations spent over all folds.
     pub iterations: usize,
+    /// The parameters of each fold's refit (for jackknife uncertainties).
+    pub fold_params: Vec<Vec<f64>>,
 }
 
 impl HeldOut {
@@ -133,6 +135,7 @@ struct FoldResult {
     /// Errors of every fix (only the fold's own are held out).
     errors: Vec<f64>,
     iterations: usize,
+    params: Vec<f64>,
 }
 
 /// Held-out errors of `model` fitted at `theta` (the full-data fit), refitting
@@ -160,14 +163,17 @@ pub fn held_out(
                 fold: f,
                 errors: fix_errors(model, fit.params()),
                 iterations,
+                params: fit.params().to_vec(),
             })
         })
         .collect();
     let mut errors = vec![f64::NAN; sig.fixes.len()];
     let mut iterations = 0;
+    let mut fold_params = Vec::new();
     for r in results {
         let r = r?;
         iterations += r.iterations;
+        fold_params.push(r.params);
         for (i, e) in r.errors.into_iter().enumerate() {
             if fold_of[i] == r.fold {
                 errors[i] = e;
@@ -178,6 +184,7 @@ pub fn held_out(
         errors,
         blocks: sig.fixes.iter().map(|f| folds.block(f.t, t0)).collect(),
         iterations,
+        fold_params,
     })
 }
 
