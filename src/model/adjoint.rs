@@ -31,12 +31,13 @@ impl Model {
     pub fn gradient(&self, theta: &[f64]) -> (f64, Vec<f64>) {
         // The corrected signals with every chain stage kept: the path is built
         // from them and the back-propagation below needs the stage inputs.
-        let (rates, rate_inputs) = self.corrected_rates(theta, 0, true);
-        let (dist, dist_inputs) = self.corrected_distances(theta, 0, true);
+        let rows = (0, self.horizon());
+        let (rates, rate_inputs) = self.corrected_rates(theta, rows, true);
+        let (dist, dist_inputs) = self.corrected_distances(theta, rows, true);
         let plan = self.obs_plan(theta);
         let (q0, p0, _) = self.initial_state(theta);
         // Attitude at every row, positions where the observations look.
-        let path = self.forward(theta, 0, (q0, p0), Some((&rates, &dist)), &plan.row, true);
+        let path = self.forward(theta, (0, q0, p0), Some((&rates, &dist)), &plan.row, true);
         let sig = &self.signals;
         let n = self.horizon();
         let mut grad = vec![0.0; self.n_params()];

@@ -37,7 +37,7 @@
 //! the light rows' accuracy). Unknowns are scaled by `sqrt(D_i)` so that the
 //! array's columns are of similar size.
 
-use nalgebra::{DMatrix, DVector, Vector3};
+use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
 
 use super::normal::{ChainLinearisation, V9};
 
@@ -213,22 +213,12 @@ fn triangularise(a: &mut DMatrix<f64>, n: usize) {
     }
 }
 
-/// Solve the upper-triangular `r x = z` (`r` square); `None` if singular or not finite.
-fn back_substitute(r: &DMatrix<f64>, z: &[f64]) -> Option<Vec<f64>> {
-    let n = z.len();
-    let mut x = vec![0.0; n];
-    for i in (0..n).rev() {
-        let mut v = z[i];
-        for (k, xk) in x.iter().enumerate().skip(i + 1) {
-            v -= r[(i, k)] * xk;
-        }
-        let d = r[(i, i)];
-        if d == 0.0 {
-            return None;
-        }
-        x[i] = v / d;
-    }
-    x.iter().all(|v| v.is_finite()).then_some(x)
+/// Solve the upper-triangular `r x = z`; `None` if singular or not finite.
+fn solve_upper(r: DMatrixView<f64>, z: &DVector<f64>) -> Option<Vec<f64>> {
+    let x = r.solve_upper_triangular(z)?;
+    x.iter()
+        .all(|v| v.is_finite())
+        .then(|| x.as_slice().to_vec())
 }
 
 /// `(U, T)` of a 9-vector `y = [U; V; D]` about origin `c`: `T = U x c + D - V`.
@@ -479,8 +469,10 @@ impl ChainSystem {
 
         // Backward pass.
         let n = work.n();
-        let z: Vec<f64> = work.rows.column(n).iter().copied().collect();
-        let last = back_substitute(&work.rows.columns(0, n).into_owned(), &z)?;
+        let last = solve_upper(
+            work.rows.view((0, 0), (n, n)),
+            &work.rows.column(n).into_owned(),
+        )?;
         let mut xb: Vec<Vec<f64>> = vec![Vec::new(); nb];
         let mut c = 0;
         for &(b, m) in &work.open {
@@ -515,18 +507,10 @@ impl ChainSystem {
                     }
                     known.extend_from_slice(&s);
                     known.extend_from_slice(&xg);
-                    let ncols = rows.ncols();
-                    let rhs: Vec<f64> = (0..m)
-                        .map(|i| {
-                            rows[(i, ncols - 1)]
-                                - known
-                                    .iter()
-                                    .enumerate()
-                                    .map(|(k, v)| rows[(i, m + k)] * v)
-                                    .sum::<f64>()
-                        })
-                        .collect();
-                    xb[block] = back_substitute(&rows.columns(0, m).rows(0, m).into_owned(), &rhs)?;
+                    let rest_cols = rows.ncols() - 1 - m;
+                    let rhs = rows.column(m + rest_cols)
+                        - rows.view((0, m), (m, rest_cols)) * DVector::from_vec(known);
+                    xb[block] = solve_upper(rows.view((0, 0), (m, m)), &rhs)?;
                 }
             }
         }

@@ -178,7 +178,7 @@ impl Model {
         if lag.is_some() && lag_value != 0.0 && lag_value.is_finite() {
             let t = &sig.t;
             let last = self.horizon() - 1;
-            let first = self.anchor_for(theta).map_or(0, |a| a.row);
+            let (first, _, _) = self.sweep_start(theta);
             for o in obs {
                 let te = o.t - lag_value;
                 if te <= t[first] {

@@ -13,6 +13,9 @@ use super::Model;
 pub(crate) const CHUNK_ROWS: usize = if cfg!(test) { 500 } else { 90_000 };
 const MAX_CHUNKS: usize = 64;
 
+/// A row and the attitude and position there, where a sweep starts.
+pub(crate) type Start = (usize, UnitQuaternion<f64>, Vector3<f64>);
+
 /// The path where the observations look, from one forward sweep.
 pub(crate) struct Forward {
     /// Attitudes (if kept) per chunk: the chunk's start attitude `q_a`, its
@@ -39,14 +42,14 @@ pub struct Trajectory {
 impl Model {
     /// Corrected rates (rad/s) of every step: the gyro chain applied in batch.
     /// With `keep_inputs`, also the input of every gyro effect whose backward pass reads it (empty for the others).
-    /// Rows before `first` are left out (`rates[j - first]` is row `j`'s).
+    /// Only the rows `first..to` (`rates[j - first]` is row `j`'s).
     pub(crate) fn corrected_rates(
         &self,
         theta: &[f64],
-        first: usize,
+        (first, to): (usize, usize),
         keep_inputs: bool,
     ) -> (Vec<Vector3<f64>>, Vec<Vec<Vector3<f64>>>) {
-        let mut rates = self.signals.gyro[first..self.horizon()].to_vec();
+        let mut rates = self.signals.gyro[first..to].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.gyro_chain {
             if keep_inputs {
@@ -65,10 +68,10 @@ impl Model {
     pub(crate) fn corrected_distances(
         &self,
         theta: &[f64],
-        first: usize,
+        (first, to): (usize, usize),
         keep_inputs: bool,
     ) -> (Vec<f64>, Vec<Vec<f64>>) {
-        let mut d = self.signals.distance[first..self.horizon()].to_vec();
+        let mut d = self.signals.distance[first..to].to_vec();
         let mut inputs = Vec::new();
         for &e in &self.distance_chain {
             if keep_inputs {
@@ -79,6 +82,21 @@ impl Model {
         (d, inputs)
     }
 
+    /// Where the cost sweeps start at `theta`: the anchor's row and state
+    /// while the anchor holds, else row 0 and the initial state.
+    pub(crate) fn sweep_start(&self, theta: &[f64]) -> Start {
+        match self.anchor_for(theta) {
+            Some(a) => (a.row, a.q, a.p),
+            None => self.start_of_ride(theta),
+        }
+    }
+
+    /// Row 0 and the initial state at `theta`.
+    fn start_of_ride(&self, theta: &[f64]) -> Start {
+        let (q, p, _) = self.initial_state(theta);
+        (0, q, p)
+    }
+
     /// Run eq. 1-4 over the ride (from the anchor of a window), calling
     /// `visit(j, q_j, p_j, theta_j, d_j)` at every row.
     #[inline]
@@ -87,30 +105,20 @@ impl Model {
         theta: &[f64],
         visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
-        let first = self.anchor_for(theta).map_or(0, |a| a.row);
-        let (rates, _) = self.corrected_rates(theta, first, false);
-        let (dist, _) = self.corrected_distances(theta, first, false);
-        self.sweep_corrected(theta, first, &rates, &dist, visit);
+        self.sweep_from(theta, self.sweep_start(theta), visit);
     }
 
-    /// Eq. 1-4 from row `first` (0 or the anchor's) with already corrected
-    /// rates and distances of the rows from `first` on (see [`sweep`](Model::sweep)).
+    /// Eq. 1-4 from `start` (a row and the state there) to the horizon.
     #[inline]
-    fn sweep_corrected(
+    fn sweep_from(
         &self,
         theta: &[f64],
-        first: usize,
-        rates: &[Vector3<f64>],
-        dist: &[f64],
+        (first, mut q, mut p): Start,
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
-        let (mut q, mut p) = match self.anchor_for(theta) {
-            Some(a) if a.row == first => (a.q, a.p),
-            _ => {
-                let (q, p, _) = self.initial_state(theta);
-                (q, p)
-            }
-        };
+        let rows = (first, self.horizon());
+        let (rates, _) = self.corrected_rates(theta, rows, false);
+        let (dist, _) = self.corrected_distances(theta, rows, false);
         let (f, _) = self.forward_axis(theta);
         let inc = self.spec.increment;
         visit(first, &q, &p, &Vector3::zeros(), 0.0);
@@ -124,25 +132,6 @@ impl Model {
         }
     }
 
-    /// Corrected rates and distances of rows `from..to`.
-    fn corrected_run(
-        &self,
-        theta: &[f64],
-        from: usize,
-        to: usize,
-    ) -> (Vec<Vector3<f64>>, Vec<f64>) {
-        let sig = &self.signals;
-        let mut rates = sig.gyro[from..to].to_vec();
-        for &e in &self.gyro_chain {
-            self.effects[e].gyro_batch(self.params_of(e, theta), from, &mut rates);
-        }
-        let mut dist = sig.distance[from..to].to_vec();
-        for &e in &self.distance_chain {
-            self.effects[e].distance_batch(self.params_of(e, theta), from, &mut dist);
-        }
-        (rates, dist)
-    }
-
     /// Eq. 1-4 from row `first` (state `q0`, `p0`) in parallel: the rows are
     /// cut into chunks, each integrated from the identity (`q = q_a r_j`,
     /// `p = p_a + q_a s_j` with `r_j`, `s_j` the chunk's own attitude and
@@ -153,8 +142,7 @@ impl Model {
     pub(crate) fn forward(
         &self,
         theta: &[f64],
-        first: usize,
-        (q0, p0): (UnitQuaternion<f64>, Vector3<f64>),
+        (first, q0, p0): Start,
         corrected: Option<(&[Vector3<f64>], &[f64])>,
         rows: &[usize],
         keep_q: bool,
@@ -181,7 +169,10 @@ impl Model {
                 let (rates, dist) = match corrected {
                     Some((w, d)) => (&w[a + 1 - first..], &d[a + 1 - first..]),
                     None => {
-                        own = self.corrected_run(theta, a + 1, b + 1);
+                        own = (
+                            self.corrected_rates(theta, (a + 1, b + 1), false).0,
+                            self.corrected_distances(theta, (a + 1, b + 1), false).0,
+                        );
                         (&own.0[..], &own.1[..])
                     }
                 };
@@ -232,25 +223,13 @@ impl Model {
         theta: &[f64],
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>),
     ) {
-        let (rates, _) = self.corrected_rates(theta, 0, false);
-        let (dist, _) = self.corrected_distances(theta, 0, false);
-        self.sweep_corrected(theta, 0, &rates, &dist, |j, q, p, _, _| visit(j, q, p));
+        self.sweep_from(theta, self.start_of_ride(theta), |j, q, p, _, _| {
+            visit(j, q, p)
+        });
     }
 
     /// The full path for `theta` (from row 0, also for a window).
     pub fn trajectory(&self, theta: &[f64]) -> Trajectory {
-        let (rates, _) = self.corrected_rates(theta, 0, false);
-        let (dist, _) = self.corrected_distances(theta, 0, false);
-        self.trajectory_corrected(theta, &rates, &dist)
-    }
-
-    /// The full path from already corrected rates and distances.
-    pub(crate) fn trajectory_corrected(
-        &self,
-        theta: &[f64],
-        rates: &[Vector3<f64>],
-        dist: &[f64],
-    ) -> Trajectory {
         let n = self.horizon();
         let mut t = Trajectory {
             q: Vec::with_capacity(n),
@@ -258,7 +237,7 @@ impl Model {
             theta: Vec::with_capacity(n),
             d: Vec::with_capacity(n),
         };
-        self.sweep_corrected(theta, 0, rates, dist, |_, q, p, th, d| {
+        self.sweep_from(theta, self.start_of_ride(theta), |_, q, p, th, d| {
             t.q.push(*q);
             t.p.push(*p);
             t.theta.push(*th);
@@ -298,16 +277,7 @@ impl Model {
     pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
         let plan = self.obs_plan(theta);
         let obs = &self.observations;
-        let anchor = self.anchor_for(theta);
-        let first = anchor.map_or(0, |a| a.row);
-        let start = match anchor {
-            Some(a) => (a.q, a.p),
-            None => {
-                let (q, p, _) = self.initial_state(theta);
-                (q, p)
-            }
-        };
-        let fw = self.forward(theta, first, start, None, &plan.row, false);
+        let fw = self.forward(theta, self.sweep_start(theta), None, &plan.row, false);
         let mut ev = Evaluation::default();
         for (k, o) in obs.iter().enumerate() {
             let v = plan.value(k, o, plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));

@@ -332,16 +332,14 @@ impl Reconstruction {
 
     /// The first step and start time of the first segment starting at or after `from`.
     fn first_segment_from(&self, from: f64) -> Option<(usize, f64)> {
+        let start = self
+            .segment_starts()
+            .into_iter()
+            .map(|(_, _, start)| start)
+            .filter(|&start| start >= from && start.is_finite())
+            .min_by(f64::total_cmp)?;
         let t = &self.model.signals.t;
-        self.model
-            .effects()
-            .iter()
-            .filter(|e| e.role() == Role::Segments)
-            .flat_map(|e| (0..e.n_params()).filter_map(|k| e.param_steps(k)))
-            .map(|(first, _)| first)
-            .filter(|&first| first >= 1 && first < t.len() && t[first] >= from)
-            .min()
-            .map(|first| (first, t[first]))
+        Some((t.partition_point(|&x| x < start), start))
     }
 
     pub fn model(&self) -> &Model {
