@@ -44,6 +44,20 @@ fn drop_fix(f: &mut [String]) {
     }
 }
 
+/// The simulated ride with only the fixes whose count `k` (1 for the first) passes `keep`.
+fn keeping_fixes(duration_s: f64, keep: impl Fn(usize) -> bool) -> String {
+    let kept = std::cell::Cell::new(0usize);
+    edited(duration_s, |_, mut f| {
+        if !f[5].is_empty() {
+            kept.set(kept.get() + 1);
+            if !keep(kept.get()) {
+                drop_fix(&mut f);
+            }
+        }
+        Some(f)
+    })
+}
+
 /// The message a fit of `csv` stops with.
 fn refusal(csv: &str) -> String {
     let sig = match parse(csv.as_bytes(), "ride.csv").map_err(|e| e.to_string()) {
@@ -78,16 +92,7 @@ fn all_fixes_in_one_spot_make_the_heading_unobservable() {
 #[test]
 fn fixes_too_sparse_for_a_course_are_refused() {
     // One fix every 20 s: no two within 2.5 s of each other.
-    let kept = std::cell::Cell::new(0usize);
-    let csv = edited(120.0, |_, mut f| {
-        if !f[5].is_empty() {
-            kept.set(kept.get() + 1);
-            if kept.get() % 20 != 1 {
-                drop_fix(&mut f);
-            }
-        }
-        Some(f)
-    });
+    let csv = keeping_fixes(120.0, |k| k % 20 == 1);
     let msg = refusal(&csv);
     assert!(
         msg.contains("ride.csv") && msg.contains("too sparse"),
@@ -98,16 +103,7 @@ fn fixes_too_sparse_for_a_course_are_refused() {
 #[test]
 fn fewer_fixes_than_parameters_is_refused_with_the_counts() {
     // Keep two consecutive fixes in twenty: 120 s of ride, 24 segments, 12 fixes.
-    let kept = std::cell::Cell::new(0usize);
-    let csv = edited(120.0, |_, mut f| {
-        if !f[5].is_empty() {
-            kept.set(kept.get() + 1);
-            if kept.get() % 20 > 2 {
-                drop_fix(&mut f);
-            }
-        }
-        Some(f)
-    });
+    let csv = keeping_fixes(120.0, |k| k % 20 <= 2);
     let msg = refusal(&csv);
     assert!(
         msg.contains("ride.csv") && msg.contains("GPS fixes") && msg.contains("fewer than"),

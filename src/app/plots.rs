@@ -9,6 +9,7 @@ use egui::{Color32, Id};
 use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine};
 
 use super::worker::{RideView, Snapshot};
+use crate::optimisation::IterationReport;
 
 const GPS: Color32 = Color32::from_rgb(120, 160, 255);
 const PATH: Color32 = Color32::from_rgb(255, 200, 60);
@@ -160,19 +161,18 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
         .x_axis_label("iteration")
         .y_axis_formatter(|mark, _| format!("{:.0e}", 10f64.powf(mark.value)))
         .show(ui, |plot| {
-            let pts: PlotPoints = snap
-                .history
-                .iter()
-                .filter(|r| r.cost > 0.0 && r.cost.is_finite())
-                .map(|r| [r.iteration as f64, r.cost.log10()])
-                .collect();
+            // log10 of a positive, finite value per iteration.
+            let log_series = |value: fn(&IterationReport) -> f64| -> PlotPoints {
+                snap.history
+                    .iter()
+                    .map(|r| (r.iteration as f64, value(r)))
+                    .filter(|(_, v)| *v > 0.0 && v.is_finite())
+                    .map(|(i, v)| [i, v.log10()])
+                    .collect()
+            };
+            let pts = log_series(|r| r.cost);
             plot.line(Line::new("cost", pts).color(PATH).width(2.0));
-            let rms: PlotPoints = snap
-                .history
-                .iter()
-                .filter(|r| r.rms_horizontal_m > 0.0 && r.rms_horizontal_m.is_finite())
-                .map(|r| [r.iteration as f64, r.rms_horizontal_m.log10()])
-                .collect();
+            let rms = log_series(|r| r.rms_horizontal_m);
             plot.line(
                 Line::new("GPS RMS (m), fixes fitted (step 1: its window)", rms)
                     .color(GPS)
