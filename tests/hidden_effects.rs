@@ -204,27 +204,24 @@ fn mount_misalignment_is_found_and_the_forward_axis_recovered() {
 }
 
 #[test]
-fn a_temperature_driven_bias_helps_and_shows_in_the_segment_biases() {
-    // Weaker evidence than the effects above (README, diagnosis table): the
-    // random-walk segment biases absorb most of a temperature drift, so the
-    // held-out gain sits in the first minutes of the ride, where the
-    // temperature changes fastest. It must still help and rank near the top,
-    // and the segment biases must follow the temperature.
-    let c = case(51, &["gyro_bias_channel:temp_c"], &["paper"]);
-    let rank = c
-        .diagnosis
-        .ranking
-        .iter()
-        .position(|r| r.effect == "gyro_bias_channel:temp_c")
-        .expect("ranked");
-    assert!(rank <= 1, "{:?}", c.diagnosis.ranking);
-    assert!(c.diagnosis.ranking[rank].drop > 0.02);
-    let temp_z = c
-        .diagnosis
-        .structure
-        .iter()
-        .find(|k| k.quantity == "bias_z" && k.signal == "temp_c")
-        .expect("bias_z ~ temp_c");
-    eprintln!("  segment bias z ~ temp_c: r = {:.2}", temp_z.r);
-    assert!(temp_z.r.abs() > 0.6, "{temp_z:?}");
+fn a_temperature_driven_bias_is_found_and_its_yaw_coefficient_recovered() {
+    // The simulated logger warms at stops and in sunshine and cools when
+    // riding (src/simulation/thermal.rs): the bias moves faster than the
+    // random walk of the segment biases can follow, so adding the channel
+    // lowers the held-out error across the ride, not only at its ends.
+    for seed in [51, 53] {
+        let c = case(seed, &["gyro_bias_channel:temp_c"], &["paper"]);
+        let est = found(&c, "gyro_bias_channel:temp_c", &["paper"]);
+        let truth = c.sim.truth.temp_coefficient_dps_per_c.expect("coefficient")[2];
+        let z = est["slope_z"];
+        eprintln!("  yaw temperature coefficient {z:.4} deg/s/C (truth {truth:.4})");
+        assert!(within(z, truth, 0.2), "z coefficient {z} vs {truth}");
+        let temp_z = c
+            .diagnosis
+            .structure
+            .iter()
+            .find(|k| k.quantity == "bias_z" && k.signal == "temp_c")
+            .expect("bias_z ~ temp_c");
+        eprintln!("  segment bias z ~ temp_c: r = {:.2}", temp_z.r);
+    }
 }

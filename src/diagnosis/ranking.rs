@@ -317,7 +317,7 @@ fn estimates(
     only: Option<&str>,
     folds: &[Vec<f64>],
 ) -> BTreeMap<String, Estimate> {
-    let free = model.free_mask(&[Role::Global, Role::Segments]);
+    let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
     let ne = model.normal_equations(theta, &free);
     let m = model.n_residuals() as f64;
     let s2 = ne.cost / (m - ne.columns.len() as f64).max(1.0);

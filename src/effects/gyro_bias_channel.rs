@@ -11,11 +11,24 @@
 //! `c_ref` is the channel's mean over the ride, so the slope does not also
 //! carry a constant bias (that stays with `gyro_bias`). The channel is used as
 //! filled by the loader (held between samples).
+//!
+//! Prior: the bias the channel explains over the ride, slope times the
+//! channel's standard deviation `s_c`, is `N(0, 0.5 deg/s)` per axis
+//! (residual `k_a s_c / 0.5 deg/s`). Real sensitivities (a few hundredths of
+//! a deg/s per degree C over a spread of a few degrees) sit well inside it;
+//! it keeps the slope of the barely observable roll axis finite.
+//!
+//! The slopes are fitted in step 2 only ([`Role::Step2Only`]): inside step
+//! 1's first, short windows the channel hardly varies, so its slope is just
+//! more constant bias there, and a slope fitted on one window threw the next,
+//! wider one into a wrong basin (10 m from the fixes on a simulated ride).
+//! Step 2 starts from the paper's path and tells the slope from the segment
+//! biases by the fast part of the channel, which the random walk cannot follow.
 
 use nalgebra::Vector3;
 
 use super::gyro_bias::DEG_PER_RAD;
-use super::{Effect, GyroPartials, ParamInfo};
+use super::{Effect, GyroPartials, ParamInfo, PriorRows, Role};
 use crate::model::{ModelError, StartGuess};
 use crate::signals::Signals;
 
@@ -24,7 +37,12 @@ pub struct GyroBiasChannel {
     channel: String,
     /// `c_j - c_ref` per row.
     centred: Vec<f64>,
+    /// Prior weight `s_c / 0.5 deg/s` (per rad/s of slope).
+    prior_weight: f64,
 }
+
+/// Prior standard deviation of the bias a channel explains (deg/s).
+const PRIOR_BIAS_DPS: f64 = 0.5;
 
 impl GyroBiasChannel {
     pub fn new(signals: &Signals, channel: &str) -> Result<Self, ModelError> {
@@ -51,9 +69,11 @@ impl GyroBiasChannel {
                 reason: format!("channel '{channel}' is constant over the ride"),
             });
         }
+        let std = (centred.iter().map(|v| v * v).sum::<f64>() / centred.len() as f64).sqrt();
         Ok(Self {
             channel: channel.to_string(),
             centred,
+            prior_weight: std / (PRIOR_BIAS_DPS / DEG_PER_RAD),
         })
     }
 }
@@ -74,8 +94,25 @@ impl Effect for GyroBiasChannel {
         vec![0.0; 3]
     }
 
+    fn role(&self) -> Role {
+        Role::Step2Only
+    }
+
     fn acts_on_gyro(&self) -> bool {
         true
+    }
+
+    fn n_prior(&self) -> usize {
+        3
+    }
+
+    /// Residuals `k_a s_c / 0.5 deg/s`.
+    fn prior(&self, p: &[f64], out: &mut PriorRows) {
+        for (a, k) in p.iter().enumerate().take(3) {
+            let row = out.residuals.len();
+            out.residuals.push(k * self.prior_weight);
+            out.entries.push((row, a, self.prior_weight));
+        }
     }
 
     fn gyro(&self, p: &[f64], j: usize, omega: Vector3<f64>) -> Vector3<f64> {

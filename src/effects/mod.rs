@@ -80,6 +80,12 @@ pub enum Role {
     Step1Only,
     /// Per-segment parameters, fitted in step 2.
     Segments,
+    /// Fitted in step 2 only, with the segments: a parameter that the data
+    /// tell apart from the segment biases only through what they cannot
+    /// follow, and that a short step-1 window cannot pin (a bias slope on a
+    /// channel that hardly varies inside the window is just more constant
+    /// bias there, and extrapolates wildly when the window widens).
+    Step2Only,
 }
 
 /// Up to three parameter columns touched at one step: `(local index, d out / d param)`.

@@ -411,8 +411,11 @@ impl Reconstruction {
                 free
             }
             (Phase::Step1, _) => self.model.free_mask(&[Role::Global, Role::Step1Only]),
-            (_, Method::Lm) => self.model.free_mask(&[Role::Global, Role::Segments]),
-            (_, Method::Gd) => self.model.free_mask(&[Role::Segments]),
+            (_, Method::Lm) => {
+                self.model
+                    .free_mask(&[Role::Global, Role::Segments, Role::Step2Only])
+            }
+            (_, Method::Gd) => self.model.free_mask(&[Role::Segments, Role::Step2Only]),
         }
     }
 

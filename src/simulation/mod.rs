@@ -16,6 +16,7 @@
 
 pub mod rng;
 pub mod route;
+pub mod thermal;
 
 use std::fmt::Write as _;
 
@@ -25,6 +26,7 @@ use thiserror::Error;
 use crate::geodesy::{Geodetic, LocalFrame};
 use rng::Rng;
 use route::Route;
+use thermal::Thermal;
 
 /// Effects the simulator can hide in a ride.
 pub const HIDDEN_EFFECTS: [&str; 5] = [
@@ -179,8 +181,10 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let bias_walk = rng.range(0.002, 0.004);
     let noise_dps = 0.07;
     let lsb_dps = 1.0 / 65.5;
-    let temp_ambient = rng.range(8.0, 18.0);
-    let temp_start = rng.range(22.0, 28.0);
+    let temp_air = rng.range(8.0, 18.0);
+    // Temperature at which the bias is `bias0` (a hidden temperature
+    // coefficient moves it by `c (T - temp_calibration)`).
+    let temp_calibration = rng.range(22.0, 28.0);
     let temp_tau = rng.range(400.0, 900.0);
     let baro_offset = rng.range(-30.0, 60.0);
     let baro_drift = rng.sign() * rng.range(1.0, 4.0);
@@ -202,9 +206,9 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     });
     let temp_coeff = hidden_has(config, "gyro_bias_channel:temp_c").then(|| {
         [
-            rng.sign() * rng.range(0.01, 0.03),
-            rng.sign() * rng.range(0.01, 0.03),
-            rng.sign() * rng.range(0.015, 0.03),
+            rng.sign() * rng.range(0.03, 0.06),
+            rng.sign() * rng.range(0.03, 0.06),
+            rng.sign() * rng.range(0.04, 0.08),
         ]
     });
     let mount = misalign.map_or(UnitQuaternion::identity(), |m| {
@@ -273,10 +277,21 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let baro_every = ((config.rate_hz / 10.0).round() as usize).max(1);
     let temp_every = (config.rate_hz.round() as usize).max(1);
     let mut next_fix = 0.0f64;
-    let mut bias_end = bias0;
     let mut truth_enu = Vec::with_capacity(n);
     let t_decimals = if config.rate_hz > 100.0 { 3 } else { 2 };
-    let temperature = |t: f64| temp_ambient + (temp_start - temp_ambient) * (-t / temp_tau).exp();
+    // Its own random stream, so the thermal model leaves every other draw as it was.
+    let mut thermal = Thermal::new(
+        Rng::new(config.seed ^ 0x7E4D_5EED_0BAD_CAFE),
+        temp_air,
+        0.15 * temp_tau,
+    );
+    let temp_bias = |temp: f64| {
+        temp_coeff.map_or(Vector3::zeros(), |c| {
+            Vector3::new(c[0], c[1], c[2]) * (temp - temp_calibration)
+        })
+    };
+    let bias_start = bias0 + temp_bias(thermal.temperature());
+    let mut bias_end = bias_start;
     for k in 0..n {
         let t = times[k];
         let st = &states[k];
@@ -292,7 +307,10 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         );
 
         // Gyro: exact mean body rate over the step, into the sensor frame.
-        let temp = temperature(t);
+        if k > 0 {
+            thermal.step(st.speed, dt);
+        }
+        let temp = thermal.temperature();
         let gyro = if k == 0 {
             Vector3::zeros()
         } else {
@@ -300,10 +318,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             let sensor = mount.inverse() * body;
             walk +=
                 Vector3::new(rng.normal(), rng.normal(), rng.normal()) * (bias_walk * dt.sqrt());
-            let mut bias = bias0 + walk;
-            if let Some(c) = temp_coeff {
-                bias += Vector3::new(c[0], c[1], c[2]) * (temp - temp_start);
-            }
+            let bias = bias0 + walk + temp_bias(temp);
             bias_end = bias;
             let mut w = sensor.map(f64::to_degrees);
             if let Some(s) = scale {
@@ -384,7 +399,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         wheel_circumference_true_m: c_true,
         wheel_circumference_configured_m: c_conf,
         odometer_gain: c_true / c_conf,
-        gyro_bias_start_dps: bias0.into(),
+        gyro_bias_start_dps: bias_start.into(),
         gyro_bias_end_dps: bias_end.into(),
         bias_walk_dps_sqrt_s: bias_walk,
         gps_outages_s: outages,
