@@ -6,7 +6,7 @@
 //! pulses with a wrongly configured circumference; 1 Hz GPS with noise
 //! correlated over about a minute plus white noise and outages of 20-60 s;
 //! noisy GPS altitude; a barometer (10 Hz) with an offset and a slow drift; a
-//! temperature channel (1 Hz). Optional *hidden* effects, which the paper's
+//! temperature channel (1 Hz) from a thermal model of the logger ([`thermal`]). Optional *hidden* effects, which the paper's
 //! model lacks: `gyro_scale`, `gps_lag`, `mount_misalignment`,
 //! `gyro_bias_channel:temp_c`, `gps_outliers`.
 //!
