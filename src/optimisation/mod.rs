@@ -660,3 +660,45 @@ fn check_observability(model: &Model) -> Result<(), FitError> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::model::ModelSpec;
+
+    /// A channel's bias slopes stay at zero through step 1 (whose short
+    /// windows cannot tell them from constant bias) and are fitted in step 2,
+    /// by LM and by gradient descent.
+    #[test]
+    fn step2_only_parameters_wait_for_step_2() {
+        let id = "gyro_bias_channel:temp_c";
+        let sig = Arc::new(crate::testing::simulated_signals(53, 300.0, &[id]));
+        for method in [Method::Lm, Method::Gd] {
+            let settings = FitSettings {
+                model: ModelSpec {
+                    effects: vec!["paper".into(), id.into()],
+                    ..ModelSpec::default()
+                },
+                method,
+                ..FitSettings::default()
+            };
+            let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
+            let e = fit.model().effect_index(id).expect("channel effect");
+            let slopes = fit.model().range(e);
+            while fit.phase() == Phase::Step1 {
+                fit.iterate();
+                assert!(
+                    fit.params()[slopes.clone()].iter().all(|&k| k == 0.0),
+                    "{method:?}: slopes moved in step 1"
+                );
+            }
+            fit.finish();
+            assert!(
+                fit.params()[slopes.clone()].iter().any(|&k| k != 0.0),
+                "{method:?}: slopes not fitted in step 2"
+            );
+        }
+    }
+}
