@@ -126,15 +126,17 @@ fn gps_lag_is_found_and_its_lag_recovered() {
 
 #[test]
 fn gyro_scale_is_found_and_the_yaw_factor_recovered() {
-    for seed in [43, 44] {
+    // Within 20 % on nine of ten seeds (README). Seed 44 is the exception,
+    // kept here because it is: its bias walk and GPS noise look like a
+    // +0.8 % yaw scale error even with the true one removed, so the fit
+    // lands 21 % short; its reported sigma (jackknife) covers that.
+    for (seed, tolerance) in [(43, 0.2), (44, 0.25)] {
         let c = case(seed, &["gyro_scale"], &["paper"]);
         let est = found(&c, "gyro_scale", &["paper"]);
         let truth = c.sim.truth.gyro_scale.expect("scale")[2] * 100.0;
         let z = est["scale_error_z"];
         eprintln!("  yaw scale error {z:.3} % (truth {truth:.3} %)");
-        // Within 25 %: the segment biases absorb a little of a scale error
-        // (they see it as bias during long turns); README has the figures.
-        assert!(within(z, truth, 0.25), "z scale {z} % vs {truth} %");
+        assert!(within(z, truth, tolerance), "z scale {z} % vs {truth} %");
     }
 }
 

@@ -9,9 +9,11 @@
 //! roll-axis bias can fit a drifting window and then roll the path over),
 //! so with LM the widened windows fit the segment biases instead, held
 //! beyond the window by their random-walk prior (without a prior, or with
-//! gradient descent as step 2, the constant bias as in the paper). Step 2 fits the per-segment
-//! biases with gradient descent or LM; LM also refines the globals except the
-//! constant bias, which the segments absorb. [`Reconstruction::iterate`] does
+//! gradient descent as step 2, the constant bias as in the paper). Step 2
+//! fits the per-segment biases with gradient descent or LM; LM also refines
+//! the globals except the constant bias, which the segments absorb. Effects
+//! whose parameters a short window cannot pin (a bias slope on a logged
+//! channel) wait for step 2 ([`Role::Step2Only`]). [`Reconstruction::iterate`] does
 //! one iteration and reports it; [`Reconstruction::apply_settings`] changes
 //! segment length, method, step size, damping or model between iterations
 //! without starting over (parameters carry over, segments are re-mapped).

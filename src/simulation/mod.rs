@@ -6,9 +6,10 @@
 //! pulses with a wrongly configured circumference; 1 Hz GPS with noise
 //! correlated over about a minute plus white noise and outages of 20-60 s;
 //! noisy GPS altitude; a barometer (10 Hz) with an offset and a slow drift; a
-//! temperature channel (1 Hz) from a thermal model of the logger ([`thermal`]). Optional *hidden* effects, which the paper's
-//! model lacks: `gyro_scale`, `gps_lag`, `mount_misalignment`,
-//! `gyro_bias_channel:temp_c`, `gps_outliers`.
+//! temperature channel (1 Hz) from a thermal model of the logger
+//! ([`thermal`]). Optional *hidden* effects, which the paper's model lacks:
+//! `gyro_scale`, `gps_lag`, `mount_misalignment`, `gyro_bias_channel:temp_c`,
+//! `gps_outliers`.
 //!
 //! The gyro reading of row `k` is the exact mean body rate over
 //! `(t_{k-1}, t_k]`, `Log(R_{k-1}^T R_k) / dt`, computed from the true
