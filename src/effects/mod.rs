@@ -428,7 +428,7 @@ pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Ef
         "initial_position" => Box::new(InitialPosition),
         "initial_orientation" => Box::new(InitialOrientation),
         "odometer_gain" => Box::new(OdometerGain),
-        "gyro_bias" => Box::new(GyroBias),
+        "gyro_bias" => Box::new(GyroBias::new(signals)),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,
             spec.segment_s,

@@ -29,6 +29,7 @@ pub use chain::ChainSystem;
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
+pub(crate) use start::level_bias;
 pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, Trajectory};
 

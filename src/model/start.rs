@@ -241,7 +241,7 @@ impl StartGuess {
 /// silent for 2 s) when the ride has at least 2 s of that, else the mean roll
 /// and pitch rates while not turning (a vehicle does not keep rolling or
 /// pitching; turns are left out because leaning couples yaw into pitch).
-fn level_bias(sig: &Signals) -> Vector3<f64> {
+pub(crate) fn level_bias(sig: &Signals) -> Vector3<f64> {
     let n = sig.len();
     let mut prefix = vec![0.0; n + 1];
     for j in 0..n {
