@@ -113,6 +113,16 @@ fn within(value: f64, truth: f64, rel: f64) -> bool {
 fn gps_lag_is_found_and_its_lag_recovered() {
     for seed in [41, 42] {
         let c = case(seed, &["gps_lag"], &["paper"]);
+        // The paper's fit leaves the lag's signature: a late fix sits behind
+        // the path by speed x lag, so the along-track residual follows speed.
+        let along = c
+            .diagnosis
+            .structure
+            .iter()
+            .find(|k| k.quantity == "along" && k.signal == "speed")
+            .expect("along ~ speed");
+        eprintln!("  along-track residual ~ speed: r = {:.2}", along.r);
+        assert!(along.r < -0.3, "{along:?}");
         let est = found(&c, "gps_lag", &["paper"]);
         let truth = c.sim.truth.gps_lag_s.expect("lag");
         eprintln!("  lag {:.3} s (truth {truth:.3} s)", est["lag"]);

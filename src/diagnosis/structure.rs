@@ -11,6 +11,15 @@
 //! extra channel of the log point at the culprit: along-track residual with
 //! speed says GPS latency; cross-track residual or the yaw bias with turn rate
 //! says scale factor; a segment bias with temperature says temperature-dependent bias.
+//!
+//! Segment biases are compared by their changes from one segment to the next
+//! (`b_{k+1} - b_k` against the change of the signal's segment mean). Their
+//! levels follow a random walk, and a random walk correlates with any slowly
+//! trending signal (time, accumulated heading, a cooling temperature) at
+//! |r| 0.7-0.97 on rides with nothing missing: a spurious regression. Its
+//! increments are white, so only a bias that really moves with the signal
+//! (`b = c T + walk` gives `Delta b = c Delta T + white`) correlates. Time has
+//! constant increments and drops out of the bias comparison.
 
 use nalgebra::Vector3;
 
@@ -45,6 +54,11 @@ pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
         syy += b * b;
     }
     (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
+}
+
+/// `x_{k+1} - x_k`.
+fn increments(x: &[f64]) -> Vec<f64> {
+    x.windows(2).map(|w| w[1] - w[0]).collect()
 }
 
 /// Per-row motion signals of the fitted path: speed (m/s), turn rate
@@ -135,14 +149,16 @@ pub fn structure(model: &Model, theta: &[f64]) -> Vec<Correlation> {
                 (a.min(sig.len() - 1), b)
             })
             .collect();
-        for (name, values) in &signals {
+        // Time advances by the segment length each segment: nothing to compare.
+        for (name, values) in signals.iter().filter(|(name, _)| name != "time") {
             let x: Vec<f64> = bounds
                 .iter()
                 .map(|&(a, b)| values[a..b].iter().sum::<f64>() / (b - a) as f64)
                 .collect();
+            let dx = increments(&x);
             for (axis, q) in ["bias_x", "bias_y", "bias_z"].iter().enumerate() {
                 let y: Vec<f64> = segs.iter().map(|s| s.bias_dps[axis]).collect();
-                if let Some(r) = pearson(&x, &y) {
+                if let Some(r) = pearson(&dx, &increments(&y)) {
                     out.push(Correlation {
                         quantity: q.to_string(),
                         signal: name.clone(),
@@ -171,20 +187,34 @@ mod tests {
         assert_eq!(pearson(&x, &[1.0, 1.0, 1.0, 1.0]), None);
     }
 
+    /// A random walk of the segment biases no longer looks like structure:
+    /// compared by level, the biases of a ride with nothing missing followed
+    /// time or accumulated heading at |r| 0.7-0.97; by increments they stay
+    /// below 0.6 (about 0.2-0.4 here: stops and starts move both the
+    /// temperature and the fitted biases a little). A temperature-driven bias
+    /// still shows.
     #[test]
-    fn a_temperature_driven_bias_shows_in_the_segment_biases() {
-        let sig = Arc::new(crate::testing::simulated_signals(
-            8,
-            900.0,
-            &["gyro_bias_channel:temp_c"],
-        ));
-        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
-        fit.finish();
-        let s = structure(fit.model(), fit.params());
-        let temp_z = s
+    fn segment_biases_are_compared_by_increments() {
+        let fitted = |hidden: &[&str]| {
+            let sig = Arc::new(crate::testing::simulated_signals(8, 900.0, hidden));
+            let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+            fit.finish();
+            structure(fit.model(), fit.params())
+        };
+        let plain = fitted(&[]);
+        assert!(
+            !plain
+                .iter()
+                .any(|c| c.quantity.starts_with("bias") && c.signal == "time")
+        );
+        for c in plain.iter().filter(|c| c.quantity.starts_with("bias")) {
+            assert!(c.r.abs() < 0.6, "{c:?}");
+        }
+        let temp = fitted(&["gyro_bias_channel:temp_c"]);
+        let temp_z = temp
             .iter()
             .find(|c| c.quantity == "bias_z" && c.signal == "temp_c")
             .expect("bias_z vs temp_c");
-        assert!(temp_z.r.abs() > 0.6, "{temp_z:?}");
+        assert!(temp_z.r.abs() > 0.35, "{temp_z:?}");
     }
 }
