@@ -105,6 +105,18 @@ fn found(c: &Case, effect: &str, model: &[&str]) -> std::collections::BTreeMap<S
         .collect()
 }
 
+/// The structure correlation of `quantity` with `signal` in the paper's fit (printed).
+fn correlation(c: &Case, quantity: &str, signal: &str) -> f64 {
+    let k = c
+        .diagnosis
+        .structure
+        .iter()
+        .find(|k| k.quantity == quantity && k.signal == signal)
+        .unwrap_or_else(|| panic!("no {quantity} ~ {signal} in the structure"));
+    eprintln!("  {quantity} ~ {signal}: r = {:.2}", k.r);
+    k.r
+}
+
 fn within(value: f64, truth: f64, rel: f64) -> bool {
     (value - truth).abs() <= rel * truth.abs()
 }
@@ -115,14 +127,8 @@ fn gps_lag_is_found_and_its_lag_recovered() {
         let c = case(seed, &["gps_lag"], &["paper"]);
         // The paper's fit leaves the lag's signature: a late fix sits behind
         // the path by speed x lag, so the along-track residual follows speed.
-        let along = c
-            .diagnosis
-            .structure
-            .iter()
-            .find(|k| k.quantity == "along" && k.signal == "speed")
-            .expect("along ~ speed");
-        eprintln!("  along-track residual ~ speed: r = {:.2}", along.r);
-        assert!(along.r < -0.3, "{along:?}");
+        let along = correlation(&c, "along", "speed");
+        assert!(along < -0.3, "along-track residual ~ speed: r = {along}");
         let est = found(&c, "gps_lag", &["paper"]);
         let truth = c.sim.truth.gps_lag_s.expect("lag");
         eprintln!("  lag {:.3} s (truth {truth:.3} s)", est["lag"]);
@@ -220,7 +226,7 @@ fn a_temperature_driven_bias_is_found_and_its_yaw_coefficient_recovered() {
     // The simulated logger warms at stops and in sunshine and cools when
     // riding (src/simulation/thermal.rs): the bias moves faster than the
     // random walk of the segment biases can follow, so adding the channel
-    // lowers the held-out error across the ride, not only at its ends.
+    // lowers the held-out error inside the ride.
     for seed in [51, 53] {
         let c = case(seed, &["gyro_bias_channel:temp_c"], &["paper"]);
         let est = found(&c, "gyro_bias_channel:temp_c", &["paper"]);
@@ -228,12 +234,6 @@ fn a_temperature_driven_bias_is_found_and_its_yaw_coefficient_recovered() {
         let z = est["slope_z"];
         eprintln!("  yaw temperature coefficient {z:.4} deg/s/C (truth {truth:.4})");
         assert!(within(z, truth, 0.2), "z coefficient {z} vs {truth}");
-        let temp_z = c
-            .diagnosis
-            .structure
-            .iter()
-            .find(|k| k.quantity == "bias_z" && k.signal == "temp_c")
-            .expect("bias_z ~ temp_c");
-        eprintln!("  segment bias z ~ temp_c: r = {:.2}", temp_z.r);
+        correlation(&c, "bias_z", "temp_c");
     }
 }
