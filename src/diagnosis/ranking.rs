@@ -122,7 +122,7 @@ pub fn diagnose_fitted(
         .into_iter()
         .map(|(id, _)| id)
         .filter(|id| !present.contains(id))
-        .filter(|id| effects::build(id, sig, &model.spec).is_ok())
+        .filter(|id| effects::build(id, sig, &model.spec, &model.start).is_ok())
         .collect();
     let done = std::sync::atomic::AtomicUsize::new(0);
     let mut ranking: Vec<Candidate> = ids

@@ -4,9 +4,9 @@
 //! step 1; in step 2 the per-segment biases refine it, so it is held there.
 //!
 //! Prior on the roll and pitch axes: `b_a ~ N(l_a, 0.3 deg/s)`, `a = x, y`,
-//! with `l` the level-bias guess (the mean rate while standing still, else
-//! the mean roll and pitch rates while not turning: a vehicle does not keep
-//! rolling or pitching). On a straight, a roll-axis bias leaves the path
+//! with `l` the start guess's bias there, the level-bias guess (the mean rate
+//! while standing still, else the mean roll and pitch rates while not
+//! turning: a vehicle does not keep rolling or pitching). On a straight, a roll-axis bias leaves the path
 //! unchanged (rolling about the forward axis moves nothing), so step 1's
 //! first window cannot see it; without the prior, GPS noise pulled it to
 //! 1.5 deg/s on a simulated ride, the sensor rolled over in two minutes and
@@ -17,7 +17,6 @@ use nalgebra::Vector3;
 
 use super::{Effect, GyroPartials, ParamInfo, PriorRows, Role};
 use crate::model::StartGuess;
-use crate::signals::Signals;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GyroBias {
@@ -29,9 +28,11 @@ pub struct GyroBias {
 const LEVEL_SIGMA: f64 = 0.3 / DEG_PER_RAD;
 
 impl GyroBias {
-    pub fn new(signals: &Signals) -> Self {
-        let l = crate::model::level_bias(signals);
-        Self { level: [l.x, l.y] }
+    /// Centred on the roll and pitch bias of the start guess.
+    pub fn new(start: &StartGuess) -> Self {
+        Self {
+            level: [start.gyro_bias.x, start.gyro_bias.y],
+        }
     }
 }
 
@@ -129,10 +130,11 @@ mod tests {
             ..Default::default()
         })
         .expect("simulate");
-        let sig =
-            Signals::from_log(&crate::loading::parse(sim.log_csv.as_bytes(), "s").expect("parse"))
-                .expect("signals");
-        let e = GyroBias::new(&sig);
+        let sig = crate::signals::Signals::from_log(
+            &crate::loading::parse(sim.log_csv.as_bytes(), "s").expect("parse"),
+        )
+        .expect("signals");
+        let e = GyroBias::new(&StartGuess::from_signals(&sig).expect("start"));
         let (start, end) = (sim.truth.gyro_bias_start_dps, sim.truth.gyro_bias_end_dps);
         for a in 0..2 {
             let level = e.level[a] * DEG_PER_RAD;

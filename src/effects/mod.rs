@@ -423,12 +423,17 @@ fn known(id: &str) -> bool {
 }
 
 /// Build one effect by id.
-pub fn build(id: &str, signals: &Signals, spec: &ModelSpec) -> Result<Box<dyn Effect>, ModelError> {
+pub fn build(
+    id: &str,
+    signals: &Signals,
+    spec: &ModelSpec,
+    start: &StartGuess,
+) -> Result<Box<dyn Effect>, ModelError> {
     Ok(match id {
         "initial_position" => Box::new(InitialPosition),
         "initial_orientation" => Box::new(InitialOrientation),
         "odometer_gain" => Box::new(OdometerGain),
-        "gyro_bias" => Box::new(GyroBias::new(signals)),
+        "gyro_bias" => Box::new(GyroBias::new(start)),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,
             spec.segment_s,

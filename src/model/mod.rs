@@ -29,7 +29,6 @@ pub use chain::ChainSystem;
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
-pub(crate) use start::level_bias;
 pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, Trajectory};
 
@@ -173,7 +172,7 @@ impl Model {
         let ids = effects::expand(&spec.effects, &signals)?;
         let effects: Vec<Box<dyn Effect>> = ids
             .iter()
-            .map(|id| effects::build(id, &signals, &spec))
+            .map(|id| effects::build(id, &signals, &spec, &start))
             .collect::<Result<_, _>>()?;
         let mut offsets = vec![0];
         for e in &effects {

@@ -34,7 +34,8 @@ pub struct StartGuess {
     /// Level attitude with the GPS heading.
     pub attitude: UnitQuaternion<f64>,
     pub position: Vector3<f64>,
-    /// rad/s; only the vertical (yaw) part is estimated.
+    /// rad/s: the level-bias guess (see `level_bias`), its yaw part
+    /// corrected by the drift of the raw heading against the GPS course.
     pub gyro_bias: Vector3<f64>,
     pub odometer_gain: f64,
     pub baro_offset: f64,
@@ -241,7 +242,7 @@ impl StartGuess {
 /// silent for 2 s) when the ride has at least 2 s of that, else the mean roll
 /// and pitch rates while not turning (a vehicle does not keep rolling or
 /// pitching; turns are left out because leaning couples yaw into pitch).
-pub(crate) fn level_bias(sig: &Signals) -> Vector3<f64> {
+fn level_bias(sig: &Signals) -> Vector3<f64> {
     let n = sig.len();
     let mut prefix = vec![0.0; n + 1];
     for j in 0..n {
