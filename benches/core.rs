@@ -2,7 +2,6 @@
 //! `cargo bench --bench core`; numbers are in the README.
 
 use std::hint::black_box;
-
 use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};

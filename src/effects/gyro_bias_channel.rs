@@ -62,14 +62,13 @@ impl GyroBiasChannel {
             })?;
         let mean = values.iter().sum::<f64>() / values.len().max(1) as f64;
         let centred: Vec<f64> = values.iter().map(|v| v - mean).collect();
-        let spread = centred.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-        if !(spread > 0.0 && spread.is_finite()) {
+        let std = (centred.iter().map(|v| v * v).sum::<f64>() / centred.len() as f64).sqrt();
+        if !(std > 0.0 && std.is_finite()) {
             return Err(ModelError::NotApplicable {
                 effect: format!("gyro_bias_channel:{channel}"),
                 reason: format!("channel '{channel}' is constant over the ride"),
             });
         }
-        let std = (centred.iter().map(|v| v * v).sum::<f64>() / centred.len() as f64).sqrt();
         Ok(Self {
             channel: channel.to_string(),
             centred,

@@ -35,9 +35,14 @@ impl Model {
         let (rates, rate_inputs) = self.corrected_rates(theta, rows, true);
         let (dist, dist_inputs) = self.corrected_distances(theta, rows, true);
         let plan = self.obs_plan(theta);
-        let (q0, p0, _) = self.initial_state(theta);
         // Attitude at every row, positions where the observations look.
-        let path = self.forward(theta, (0, q0, p0), Some((&rates, &dist)), &plan.row, true);
+        let path = self.forward(
+            theta,
+            self.start_of_ride(theta),
+            Some((&rates, &dist)),
+            &plan.row,
+            true,
+        );
         let sig = &self.signals;
         let n = self.horizon();
         let mut grad = vec![0.0; self.n_params()];

@@ -92,7 +92,7 @@ impl Model {
     }
 
     /// Row 0 and the initial state at `theta`.
-    fn start_of_ride(&self, theta: &[f64]) -> Start {
+    pub(crate) fn start_of_ride(&self, theta: &[f64]) -> Start {
         let (q, p, _) = self.initial_state(theta);
         (0, q, p)
     }

@@ -556,8 +556,7 @@ impl Reconstruction {
                 return Some(self.report(phase, outcome, false));
             }
         }
-        let finished = stage_done;
-        if finished {
+        if stage_done {
             self.stage_iterations = 0;
             self.phase = match phase {
                 Phase::Step1 if self.has_segments() => Phase::Step2,
@@ -566,7 +565,7 @@ impl Reconstruction {
             self.lm = LmState::new(self.settings.damping);
             self.gd = GdState::new(self.settings.step_size);
         }
-        Some(self.report(phase, outcome, finished))
+        Some(self.report(phase, outcome, stage_done))
     }
 
     fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
