@@ -5,7 +5,7 @@ use std::hint::black_box;
 use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use gyropath::loading::parse;
+use gyropath::import::parse;
 use gyropath::model::{Model, ModelSpec};
 use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::Signals;

@@ -2,7 +2,7 @@
 //! `cargo run --release --example accuracy -- [duration_s] [seeds]`
 use std::sync::Arc;
 
-use gyropath::loading::parse;
+use gyropath::import::parse;
 use gyropath::model::ModelSpec;
 use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::Signals;

@@ -1,4 +1,4 @@
-//! The command line: `gyropath fit` and `gyropath simulate`.
+//! The command line: `gyropath fit`, `diagnose`, `import`, `check`, `simulate` and `open`.
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -10,7 +10,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use gyropath::diagnosis::{Diagnosis, Folds};
 use gyropath::export::{FitReport, write_atomically, write_path_csv};
-use gyropath::loading;
+use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
 use gyropath::optimisation::{FitSettings, IterationReport, Method, Phase, Reconstruction};
 use gyropath::signals::Signals;
@@ -35,14 +35,90 @@ pub enum Command {
     Simulate(SimulateArgs),
     /// Fit the model, then rank the effects it lacks by how much each lowers the held-out error.
     Diagnose(DiagnoseArgs),
-    /// Open the app on a ride log (without arguments, `gyropath` opens it on the bundled sample).
+    /// Open the app on a ride log or bag (without arguments, `gyropath` opens it on the bundled sample).
     Open(OpenArgs),
+    /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder) or a mapped CSV to a ride-log CSV.
+    Import(ImportArgs),
+    /// Check a log's axes, units and datum against its own data, and recommend a mounting.
+    Check(CheckArgs),
 }
 
 #[derive(Debug, Args)]
 pub struct OpenArgs {
-    /// Ride log (CSV, see the shared ride-log format).
+    /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), or a CSV with --map.
     pub ride: PathBuf,
+    #[command(flatten)]
+    pub source: SourceArgs,
+}
+
+/// How to read an input: topics of a bag, mounting, column map.
+#[derive(Clone, Debug, Default, Args)]
+pub struct SourceArgs {
+    /// Bag topic of the IMU (sensor_msgs/Imu); by type when there is one.
+    #[arg(long)]
+    pub imu: Option<String>,
+    /// Bag topic of the odometer (nav_msgs/Odometry or geometry_msgs/TwistStamped).
+    #[arg(long)]
+    pub odom: Option<String>,
+    /// Bag topic of the GPS (sensor_msgs/NavSatFix).
+    #[arg(long)]
+    pub fix: Option<String>,
+    /// Sensor mounting: `auto` (what `check` recommends; the default for bags), `none` (as
+    /// logged; the default for CSV), or a mapping such as "x=-z,y=-x,z=y".
+    #[arg(long, default_value = "default")]
+    pub mount: String,
+    /// TOML column map: read the input as a mapped CSV (see README).
+    #[arg(long)]
+    pub map: Option<PathBuf>,
+    /// Second CSV with the GPS fixes of a mapped CSV, joined by time.
+    #[arg(long)]
+    pub gps: Option<PathBuf>,
+}
+
+impl SourceArgs {
+    pub fn options(&self) -> Result<ImportOptions> {
+        let mount: MountChoice = self
+            .mount
+            .parse()
+            .map_err(|e| anyhow::anyhow!("--mount: {e}"))?;
+        if self.gps.is_some() && self.map.is_none() {
+            anyhow::bail!(
+                "--gps joins a second CSV to a mapped CSV: give the column map with --map"
+            );
+        }
+        Ok(ImportOptions {
+            topics: TopicChoice {
+                imu: self.imu.clone(),
+                odom: self.odom.clone(),
+                fix: self.fix.clone(),
+            },
+            mount,
+            map: self.map.clone(),
+            gps: self.gps.clone(),
+        })
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct ImportArgs {
+    /// The input: ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), ride-log CSV, or a CSV with --map.
+    pub source: PathBuf,
+    #[command(flatten)]
+    pub options: SourceArgs,
+    /// Where to write the ride-log CSV.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct CheckArgs {
+    /// The input: ride-log CSV, ROS 1 bag, ROS 2 bag, or a CSV with --map.
+    pub source: PathBuf,
+    #[command(flatten)]
+    pub options: SourceArgs,
+    /// Write the verdicts here (JSON).
+    #[arg(long)]
+    pub json: Option<PathBuf>,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -64,6 +140,8 @@ pub struct FitArgs {
     #[arg(required = true, num_args = 1..)]
     pub rides: Vec<PathBuf>,
     #[command(flatten)]
+    pub source: SourceArgs,
+    #[command(flatten)]
     pub settings: SettingsArgs,
     /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
     #[arg(long)]
@@ -81,8 +159,10 @@ pub struct FitArgs {
 
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
-    /// Ride log (CSV, see the ride-log format).
+    /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), or a CSV with --map.
     pub ride: PathBuf,
+    #[command(flatten)]
+    pub source: SourceArgs,
     #[command(flatten)]
     pub settings: SettingsArgs,
     /// Write the diagnosis here (JSON).
@@ -203,10 +283,38 @@ impl SettingsArgs {
     }
 }
 
-/// Load a log and derive its signals.
-pub fn load_signals(path: &Path) -> Result<Signals> {
-    let log = loading::load_file(path)?;
-    Ok(Signals::from_owned_log(log)?)
+/// Read any input, say where it came from and what the checks found (unless
+/// quiet), and derive its signals.
+pub fn load_signals(path: &Path, source: &SourceArgs, quiet: bool) -> Result<Signals> {
+    let imported = import::open(path, &source.options()?)?;
+    if !quiet {
+        describe_source(&imported);
+    }
+    let warnings = imported.warnings();
+    let mut signals = Signals::from_owned_log(imported.log)?;
+    signals.warnings = warnings
+        .into_iter()
+        .chain(signals.warnings.into_iter().filter(|w| !w.is_empty()))
+        .collect();
+    signals.warnings.dedup();
+    Ok(signals)
+}
+
+/// One or two lines on stderr: what was read, from which topics, mounted how.
+fn describe_source(im: &Imported) {
+    if let Some(t) = &im.topics {
+        eprintln!(
+            "read {} ({}): IMU {}, odometer {}, GPS {}",
+            im.log.source,
+            im.kind.label(),
+            t.imu,
+            t.odom,
+            t.fix
+        );
+    }
+    if let Some(m) = &im.mount {
+        eprintln!("mounting applied: {m}");
+    }
 }
 
 fn phase_name(p: Phase) -> &'static str {
@@ -238,14 +346,15 @@ fn progress_line(r: &IterationReport) -> String {
 }
 
 pub fn fit(args: &FitArgs) -> Result<()> {
-    let batch = args.rides.len() > 1 || args.out_dir.is_some() || args.rides[0].is_dir();
+    let folder_of_rides = args.rides[0].is_dir() && !args.rides[0].join("metadata.yaml").is_file();
+    let batch = args.rides.len() > 1 || args.out_dir.is_some() || folder_of_rides;
     if batch {
         return fit_batch(args);
     }
     let ride = &args.rides[0];
     let started = Instant::now();
     let settings = args.settings.settings()?;
-    let signals = Arc::new(load_signals(ride)?);
+    let signals = Arc::new(load_signals(ride, &args.source, args.quiet)?);
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
@@ -294,15 +403,22 @@ struct BatchRow {
     outcome: Result<FitReport, String>,
 }
 
-/// Every `.csv` in the given files and folders (folders not recursed), sorted.
+/// Every `.csv`, `.bag` and `.mcap` in the given files and folders (folders not
+/// recursed; a rosbag2 folder is one ride), sorted.
 fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut rides = Vec::new();
     for input in inputs {
-        if input.is_dir() {
+        if input.is_dir() && !input.join("metadata.yaml").is_file() {
             let mut found: Vec<PathBuf> = std::fs::read_dir(input)
                 .with_context(|| format!("cannot list {}", input.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
+                .filter(|p| {
+                    p.extension().is_some_and(|x| {
+                        ["csv", "bag", "mcap"]
+                            .iter()
+                            .any(|e| x.eq_ignore_ascii_case(e))
+                    })
+                })
                 .collect();
             found.sort();
             rides.extend(found);
@@ -311,15 +427,20 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         }
     }
     if rides.is_empty() {
-        anyhow::bail!("no ride logs (*.csv) found in the given folders");
+        anyhow::bail!("no ride logs (*.csv, *.bag, *.mcap) found in the given folders");
     }
     Ok(rides)
 }
 
 /// Fit one ride of a batch and write its outputs into `out_dir`.
-fn fit_one(ride: &Path, settings: &FitSettings, out_dir: &Path) -> Result<FitReport> {
+fn fit_one(
+    ride: &Path,
+    source: &SourceArgs,
+    settings: &FitSettings,
+    out_dir: &Path,
+) -> Result<FitReport> {
     let started = Instant::now();
-    let signals = Arc::new(load_signals(ride)?);
+    let signals = Arc::new(load_signals(ride, source, true)?);
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
@@ -357,7 +478,8 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
     let rows: Vec<BatchRow> = rides
         .par_iter()
         .map(|ride| {
-            let outcome = fit_one(ride, &settings, &out_dir).map_err(|e| format!("{e:#}"));
+            let outcome =
+                fit_one(ride, &args.source, &settings, &out_dir).map_err(|e| format!("{e:#}"));
             if !args.quiet {
                 eprintln!(
                     "{} {}",
@@ -489,7 +611,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     if !(args.block_s.is_finite() && args.block_s >= 5.0) {
         anyhow::bail!("--block-s must be at least 5 s, got {}", args.block_s);
     }
-    let signals = Arc::new(load_signals(&args.ride)?);
+    let signals = Arc::new(load_signals(&args.ride, &args.source, args.quiet)?);
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
@@ -591,4 +713,81 @@ fn print_diagnosis(d: &Diagnosis) {
             );
         }
     }
+}
+
+pub fn import(args: &ImportArgs) -> Result<()> {
+    let imported = import::open(&args.source, &args.options.options()?)?;
+    describe_source(&imported);
+    for w in imported.warnings() {
+        eprintln!("warning: {w}");
+    }
+    let mut log = imported.log;
+    if let Some(t) = &imported.topics {
+        log.metadata.insert(
+            "topics".into(),
+            format!("imu {}, odom {}, fix {}", t.imu, t.odom, t.fix),
+        );
+    }
+    log.metadata.insert(
+        "mount".into(),
+        imported
+            .mount
+            .as_ref()
+            .map_or_else(|| "as logged".into(), ToString::to_string),
+    );
+    write_atomically(&args.out, None, |w| import::ride_csv::write(&log, w))?;
+    eprintln!(
+        "wrote {} ({} rows, {:.0} s, {} GPS fixes)",
+        args.out.display(),
+        log.len(),
+        log.t_s.last().copied().unwrap_or(0.0) - log.t_s.first().copied().unwrap_or(0.0),
+        log.fix_count()
+    );
+    Ok(())
+}
+
+pub fn check(args: &CheckArgs) -> Result<()> {
+    let mut options = args.options.options()?;
+    // The checks read the data as logged; the mounting is what they recommend.
+    let asked = std::mem::replace(&mut options.mount, MountChoice::AsLogged);
+    let imported = import::open(&args.source, &options)?;
+    let report = &imported.check;
+    println!("{} ({})", imported.log.source, imported.kind.label());
+    if let Some(t) = &imported.topics {
+        println!(
+            "topics    IMU {}, odometer {}, GPS {}",
+            t.imu, t.odom, t.fix
+        );
+    }
+    for w in &imported.log.warnings {
+        println!("{:<9} {w}", "note");
+    }
+    for v in &report.verdicts {
+        println!("{:<9} {}: {}", v.level.label(), v.subject, v.message);
+    }
+    println!();
+    match &report.recommended {
+        Some(m) if m.is_identity() => {
+            println!("mounting  as logged: the axes are x forward, y left, z up, in deg/s")
+        }
+        Some(m) => {
+            println!("mounting  recommended: --mount \"{m}\" (--mount auto applies it)");
+            if asked == MountChoice::AsLogged {
+                println!("          (the log is read as logged when --mount none is given)");
+            }
+        }
+        None => {
+            println!("mounting  the data cannot tell; read as logged unless --mount says otherwise")
+        }
+    }
+    if let Some(path) = &args.json {
+        write_atomically(path, Some(&args.source), |w| {
+            serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)?;
+            writeln!(w)
+        })?;
+    }
+    if report.worst() == Level::Problem && report.recommended.is_none() {
+        anyhow::bail!("the log's axes or units contradict its data, and no mounting undoes it");
+    }
+    Ok(())
 }

@@ -3,7 +3,8 @@
 //! Horvath, "Path Reconstruction based on Gyroscope Bias Estimation using GPS").
 //!
 //! Module map, in data-flow order:
-//! - [`loading`]: the ride-log CSV format into raw columns, with errors naming file, line and column.
+//! - [`import`]: every input (ride-log CSV, ROS 1 bag, ROS 2 MCAP, mapped CSV) into raw columns, with
+//!   errors naming file, line and column or topic; axes, units and datum checked against the data.
 //! - [`signals`]: what is derived once: time steps, rad/s, distance per step, fixes in ENU.
 //! - [`geodesy`]: WGS84 <-> local east/north/up.
 //! - [`effects`]: one module per physical effect (parameters, where it acts, derivatives).
@@ -23,7 +24,7 @@ pub mod diagnosis;
 pub mod effects;
 pub mod export;
 pub mod geodesy;
-pub mod loading;
+pub mod import;
 pub mod model;
 pub mod optimisation;
 pub mod signals;

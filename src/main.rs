@@ -10,7 +10,12 @@ fn main() {
         Some(cli::Command::Fit(a)) => cli::fit(a),
         Some(cli::Command::Simulate(a)) => cli::simulate(a),
         Some(cli::Command::Diagnose(a)) => cli::diagnose(a),
-        Some(cli::Command::Open(a)) => open_app(Some(a.ride.clone())),
+        Some(cli::Command::Import(a)) => cli::import(a),
+        Some(cli::Command::Check(a)) => cli::check(a),
+        Some(cli::Command::Open(a)) => a
+            .source
+            .options()
+            .and_then(|o| open_app(Some((a.ride.clone(), o)))),
         None => open_app(None),
     };
     if let Err(e) = result {
@@ -20,12 +25,16 @@ fn main() {
 }
 
 #[cfg(feature = "app")]
-fn open_app(ride: Option<std::path::PathBuf>) -> anyhow::Result<()> {
+fn open_app(
+    ride: Option<(std::path::PathBuf, gyropath::import::ImportOptions)>,
+) -> anyhow::Result<()> {
     gyropath::app::run(ride).map_err(|e| anyhow::anyhow!("cannot open the app window: {e}"))
 }
 
 #[cfg(not(feature = "app"))]
-fn open_app(_ride: Option<std::path::PathBuf>) -> anyhow::Result<()> {
+fn open_app(
+    _ride: Option<(std::path::PathBuf, gyropath::import::ImportOptions)>,
+) -> anyhow::Result<()> {
     use clap::CommandFactory;
     let _ = cli::Cli::command().print_help();
     println!();

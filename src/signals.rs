@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 use thiserror::Error;
 
 use crate::geodesy::{Geodetic, LocalFrame};
-use crate::loading::RideLog;
+use crate::import::RideLog;
 
 /// Why a loaded log cannot be used for a reconstruction.
 #[derive(Debug, Error)]
@@ -38,6 +38,9 @@ pub struct Fix {
     pub up: Option<f64>,
     /// Barometric altitude (m, unknown offset) at this row, when the log has a barometer.
     pub baro: Option<f64>,
+    /// The receiver's own 1-sigma horizontal and vertical accuracy (m), when logged.
+    pub hacc: Option<f64>,
+    pub vacc: Option<f64>,
 }
 
 /// Everything the model needs from a log, in SI units.
@@ -71,6 +74,8 @@ pub enum Odometer {
         revolutions: usize,
     },
     Cumulative,
+    /// Integrated from a logged forward speed.
+    Speed,
 }
 
 const NO_FIX: u32 = u32::MAX;
@@ -150,24 +155,7 @@ impl Signals {
             ));
         }
 
-        let (distance, odometer) = if let Some(odo) = &log.odo_m {
-            (distance_from_odometer(odo, log)?, Odometer::Cumulative)
-        } else if let Some(pulses) = &log.wheel_pulse {
-            let c: f64 = log
-                .wheel_circumference_m()
-                .and_then(|s| s.parse().ok())
-                .ok_or_else(|| unusable("wheel_circumference_m is missing".into()))?;
-            let (d, revolutions) = distance_from_pulses(&t, pulses, c);
-            (
-                d,
-                Odometer::WheelPulses {
-                    circumference_m: c,
-                    revolutions,
-                },
-            )
-        } else {
-            return Err(unusable("the log has no distance column".into()));
-        };
+        let (distance, odometer) = odometer_distance(log)?;
 
         let first = log.fix.iter().position(Option::is_some).ok_or_else(|| {
             unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into())
@@ -204,6 +192,8 @@ impl Signals {
                     en: [enu.x, enu.y],
                     up: up.map(|_| enu.z),
                     baro: baro.as_ref().map(|b| b[row]),
+                    hacc: log.gps_hacc_m.as_ref().and_then(|a| a[row]),
+                    vacc: log.gps_vacc_m.as_ref().and_then(|a| a[row]),
                 });
             }
         }
@@ -244,6 +234,57 @@ impl Signals {
             .find(|(n, _)| n == name)
             .map(|(_, v)| v.as_slice())
     }
+}
+
+/// Per-step odometer distance of a log, from whichever odometer it has
+/// (cumulative distance, then speed, then wheel pulses), and which it was.
+pub fn odometer_distance(log: &RideLog) -> Result<(Vec<f64>, Odometer), SignalError> {
+    if let Some(odo) = &log.odo_m {
+        Ok((distance_from_odometer(odo, log)?, Odometer::Cumulative))
+    } else if let Some(speed) = &log.speed_mps {
+        Ok((distance_from_speed(speed, log)?, Odometer::Speed))
+    } else if let Some(pulses) = &log.wheel_pulse {
+        let c: f64 = log
+            .wheel_circumference_m()
+            .and_then(|s| s.parse().ok())
+            .ok_or_else(|| SignalError::Unusable {
+                file: log.source.clone(),
+                message: "wheel_circumference_m is missing".into(),
+            })?;
+        let (d, revolutions) = distance_from_pulses(&log.t_s, pulses, c);
+        Ok((
+            d,
+            Odometer::WheelPulses {
+                circumference_m: c,
+                revolutions,
+            },
+        ))
+    } else {
+        Err(SignalError::Unusable {
+            file: log.source.clone(),
+            message: "the log has no distance column".into(),
+        })
+    }
+}
+
+/// Per-step distance from a signed speed: the trapezoid
+/// `d_j = (v_{j-1} + v_j) / 2 * dt_j` (a speed is an instantaneous sample);
+/// empty fields are interpolated. Negative speed is reversing: the path moves backwards.
+fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>, SignalError> {
+    if speed.iter().all(Option::is_none) {
+        return Err(SignalError::Field {
+            file: log.source.clone(),
+            line: log.line[0],
+            column: "speed_mps".into(),
+            message: "the column is empty on every row".into(),
+        });
+    }
+    let v = fill_gaps(speed);
+    let mut d = vec![0.0; v.len()];
+    for j in 1..v.len() {
+        d[j] = 0.5 * (v[j - 1] + v[j]) * (log.t_s[j] - log.t_s[j - 1]);
+    }
+    Ok(d)
 }
 
 /// Per-step distance from a cumulative odometer; empty fields are interpolated.

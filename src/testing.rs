@@ -1,6 +1,6 @@
 //! Small synthetic rides for unit tests (the simulator makes the realistic ones).
 
-use crate::loading::RideLog;
+use crate::import::RideLog;
 use crate::signals::Signals;
 use std::collections::BTreeMap;
 
@@ -80,6 +80,6 @@ pub fn simulated_signals(seed: u64, duration_s: f64, hidden: &[&str]) -> Signals
         ..Default::default()
     })
     .expect("simulate");
-    Signals::from_log(&crate::loading::parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
+    Signals::from_log(&crate::import::parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
         .expect("signals")
 }

@@ -163,7 +163,7 @@ fn the_same_ride_logged_at_10_100_and_1000_hz_gives_the_same_path() {
         .unwrap();
         let sig = std::sync::Arc::new(
             gyropath::signals::Signals::from_log(
-                &gyropath::loading::parse(sim.log_csv.as_bytes(), "rate.csv").unwrap(),
+                &gyropath::import::parse(sim.log_csv.as_bytes(), "rate.csv").unwrap(),
             )
             .unwrap(),
         );

@@ -137,7 +137,7 @@ fn a_bad_file_shows_its_error_and_keeps_the_ride() {
         .ride
         .is_some()));
     h.state_mut().apply(gyropath::app::Command::Open(
-        gyropath::app::worker::RideSource::Path(bad),
+        gyropath::app::worker::RideSource::file(bad),
     ));
     assert!(step_until(&mut h, Duration::from_secs(30), |a| a
         .error
@@ -159,7 +159,7 @@ fn diagnose_then_add_the_suggested_effect_and_the_history_grows() {
     let ride = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hidden-gps-lag.csv");
     let app = GyropathApp::new(
         AppSettings::default(),
-        gyropath::app::worker::RideSource::Path(ride),
+        gyropath::app::worker::RideSource::file(ride),
         || {},
     );
     let mut h = harness(app);

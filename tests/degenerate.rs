@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use gyropath::loading::parse;
+use gyropath::import::parse;
 use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, simulate};

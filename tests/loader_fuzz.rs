@@ -1,7 +1,7 @@
 //! Property tests of the loader: random bytes, truncated files and mutated
 //! rows never panic; a refused file's error names the file and line.
 
-use gyropath::loading::parse;
+use gyropath::import::parse;
 use gyropath::signals::Signals;
 use proptest::prelude::*;
 

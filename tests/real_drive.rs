@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use gyropath::effects::DEG_PER_RAD;
 use gyropath::geodesy::Geodetic;
-use gyropath::loading::load_file;
+use gyropath::import::load_file;
 use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::Signals;
 use nalgebra::Vector3;

@@ -194,7 +194,7 @@ impl GyropathApp {
                 Update::Loaded(view) => {
                     self.loading = None;
                     self.error = None;
-                    if let RideSource::Path(p) = &view.source {
+                    if let RideSource::Path(p, _) = &view.source {
                         self.settings.recent.retain(|r| r != p);
                         self.settings.recent.insert(0, p.clone());
                         self.settings.recent.truncate(MAX_RECENT);
@@ -255,7 +255,7 @@ impl GyropathApp {
         }
         while let Ok(p) = self.picked_rx.try_recv() {
             match p {
-                Picked::Ride(path) => self.apply(Command::Open(RideSource::Path(path))),
+                Picked::Ride(path) => self.apply(Command::Open(RideSource::file(path))),
                 Picked::Export(kind, path) => self.worker.send(Request::Export(kind, path)),
             }
         }
@@ -344,7 +344,7 @@ impl GyropathApp {
             .ride
             .as_ref()
             .map_or("ride".to_string(), |r| match &r.source {
-                RideSource::Path(p) => p
+                RideSource::Path(p, _) => p
                     .file_stem()
                     .map_or("ride".into(), |s| s.to_string_lossy().into_owned()),
                 RideSource::Bytes { .. } => "sample-ride".into(),
@@ -392,7 +392,7 @@ impl GyropathApp {
     fn dropped_files(&mut self, ui: &egui::Ui, commands: &mut Vec<Command>) {
         let dropped = ui.ctx().input(|i| i.raw.dropped_files.clone());
         if let Some(f) = dropped.into_iter().next() {
-            commands.push(Command::Open(RideSource::Path(f.path().to_path_buf())));
+            commands.push(Command::Open(RideSource::file(f.path().to_path_buf())));
         }
     }
 
@@ -411,7 +411,7 @@ impl GyropathApp {
                     }
                     for p in &self.settings.recent {
                         if ui.button(p.display().to_string()).clicked() {
-                            commands.push(Command::Open(RideSource::Path(p.clone())));
+                            commands.push(Command::Open(RideSource::file(p.clone())));
                         }
                     }
                 });
@@ -863,7 +863,7 @@ fn set_effect(list: &mut Vec<String>, id: &str, on: bool) {
 }
 
 /// Open the app window on `ride` (the bundled sample when `None`).
-pub fn run(ride: Option<PathBuf>) -> eframe::Result {
+pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Result {
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([1280.0, 800.0])
@@ -881,7 +881,7 @@ pub fn run(ride: Option<PathBuf>) -> eframe::Result {
                 .and_then(|s| eframe::get_value(s, eframe::APP_KEY))
                 .unwrap_or_default();
             let ctx = cc.egui_ctx.clone();
-            let source = ride.map_or_else(sample_ride, RideSource::Path);
+            let source = ride.map_or_else(sample_ride, |(p, o)| RideSource::Path(p, o));
             Ok(Box::new(GyropathApp::new(settings, source, move || {
                 ctx.request_repaint()
             })))

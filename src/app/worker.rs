@@ -16,7 +16,7 @@ use crate::diagnosis::{
     held_out, segment_biases,
 };
 use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
-use crate::loading;
+use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
 use crate::model::Model;
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
 use crate::signals::Signals;
@@ -29,18 +29,21 @@ const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(50);
 /// Where a ride comes from.
 #[derive(Clone, Debug)]
 pub enum RideSource {
-    Path(PathBuf),
+    /// A file or rosbag2 folder, and how to read it (topics, mounting, column map).
+    Path(PathBuf, ImportOptions),
     /// In-memory bytes (the bundled sample, a dropped file without a path).
-    Bytes {
-        name: String,
-        bytes: Arc<[u8]>,
-    },
+    Bytes { name: String, bytes: Arc<[u8]> },
 }
 
 impl RideSource {
+    /// A file read with the defaults of its kind.
+    pub fn file(path: PathBuf) -> Self {
+        Self::Path(path, ImportOptions::default())
+    }
+
     pub fn name(&self) -> String {
         match self {
-            Self::Path(p) => p.display().to_string(),
+            Self::Path(p, _) => p.display().to_string(),
             Self::Bytes { name, .. } => name.clone(),
         }
     }
@@ -84,6 +87,31 @@ pub struct RideView {
     /// Extra channels of the log (for the effect catalogue).
     pub channels: Vec<String>,
     pub warnings: Vec<String>,
+    /// What the ride was read from, and what the checks said.
+    pub origin: Origin,
+}
+
+/// Where a ride came from: its kind, the topics read (bags), the mounting
+/// applied and the checks' verdicts, for the Source panel.
+#[derive(Clone, Debug, Default)]
+pub struct Origin {
+    pub kind: Option<SourceKind>,
+    pub topics: Option<Topics>,
+    pub mount: Option<String>,
+    pub recommended: Option<String>,
+    pub verdicts: Vec<Verdict>,
+}
+
+impl Origin {
+    fn of(im: &import::Imported) -> Self {
+        Self {
+            kind: Some(im.kind),
+            topics: im.topics.clone(),
+            mount: im.mount.as_ref().map(ToString::to_string),
+            recommended: im.check.recommended.as_ref().map(ToString::to_string),
+            verdicts: im.check.verdicts.clone(),
+        }
+    }
 }
 
 /// The state of the fit after an iteration, decimated for drawing.
@@ -277,22 +305,29 @@ impl Worker {
 
     fn load(&mut self, source: RideSource) {
         self.send(Update::Loading(source.name()));
-        let parsed = match &source {
-            RideSource::Path(p) => loading::load_file(p),
-            RideSource::Bytes { name, bytes } => loading::parse(bytes, name),
+        let imported = match &source {
+            RideSource::Path(p, options) => import::open(p, options),
+            RideSource::Bytes { name, bytes } => import::parse(bytes, name)
+                .map(|log| import::checked(log, SourceKind::RideCsv, None, &MountChoice::Default)),
         };
-        let signals = match parsed
-            .map_err(|e| e.to_string())
-            .and_then(|log| Signals::from_owned_log(log).map_err(|e| e.to_string()))
-        {
-            Ok(s) => Arc::new(s),
+        let (signals, origin) = match imported.map_err(|e| e.to_string()).and_then(|im| {
+            let origin = Origin::of(&im);
+            let warnings = im.warnings();
+            let mut s = Signals::from_owned_log(im.log).map_err(|e| e.to_string())?;
+            s.warnings = warnings.into_iter().chain(s.warnings).collect();
+            s.warnings.dedup();
+            Ok((s, origin))
+        }) {
+            Ok((s, o)) => (Arc::new(s), o),
             Err(e) => {
                 self.send(Update::LoadFailed(e));
                 return;
             }
         };
         self.running = false;
-        self.send(Update::Loaded(Box::new(ride_view(&source, &signals))));
+        let mut view = ride_view(&source, &signals);
+        view.origin = origin;
+        self.send(Update::Loaded(Box::new(view)));
         self.ride = Some(LoadedRide {
             source,
             signals,
@@ -417,7 +452,7 @@ impl Worker {
             return;
         };
         let protect = match &ride.source {
-            RideSource::Path(p) => Some(p.as_path()),
+            RideSource::Path(p, _) => Some(p.as_path()),
             RideSource::Bytes { .. } => None,
         };
         let model = fit.model();
@@ -466,6 +501,7 @@ fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
         outages,
         channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
         warnings: sig.warnings.clone(),
+        origin: Origin::default(),
     }
 }
 

@@ -131,7 +131,7 @@ mod tests {
         })
         .expect("simulate");
         let sig = crate::signals::Signals::from_log(
-            &crate::loading::parse(sim.log_csv.as_bytes(), "s").expect("parse"),
+            &crate::import::parse(sim.log_csv.as_bytes(), "s").expect("parse"),
         )
         .expect("signals");
         let e = GyroBias::new(&StartGuess::from_signals(&sig).expect("start"));

@@ -96,6 +96,34 @@ pub const DEFAULT_BIAS_WALK: f64 = 0.004;
 /// How far past the last fix of a window its model sweeps (s): beyond any GPS lag.
 const HORIZON_MARGIN_S: f64 = 5.0;
 
+/// The median of the logged per-fix accuracies (`None` when no fix has one).
+fn accuracy_scale(acc: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let mut v: Vec<f64> = acc
+        .flatten()
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    Some(v[v.len() / 2])
+}
+
+/// The noise of one fix: `sigma_k = sigma * acc_k / median(acc)`.
+///
+/// A receiver's accuracy estimate is good at saying which fixes are worse
+/// than others (few satellites, multipath) and poor at the absolute level (it
+/// is a filter's covariance, often optimistic), so the fixes are weighted by
+/// their accuracy relative to the ride's median, and the setting `sigma`
+/// stays the typical fix's noise that the bias prior is balanced against. A
+/// fix without an accuracy on a ride where others have one counts as typical.
+fn fix_sigma(sigma: f64, acc: Option<f64>, median: Option<f64>) -> f64 {
+    match (acc, median) {
+        (Some(a), Some(m)) if a.is_finite() && a > 0.0 => sigma * a / m,
+        _ => sigma,
+    }
+}
+
 /// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
 /// position at `row`, compared with `target`, weighted by `w = 1/sigma`.
 #[derive(Clone, Copy, Debug)]
@@ -192,8 +220,10 @@ impl Model {
         let n_prior = effects.iter().map(|e| e.n_prior()).sum();
 
         let mut observations = Vec::new();
+        let h_scale = accuracy_scale(signals.fixes.iter().map(|f| f.hacc));
+        let v_scale = accuracy_scale(signals.fixes.iter().map(|f| f.vacc));
         for fix in &signals.fixes {
-            let wh = 1.0 / spec.sigma_horizontal_m;
+            let wh = 1.0 / fix_sigma(spec.sigma_horizontal_m, fix.hacc, h_scale);
             for axis in 0..2 {
                 observations.push(Observation {
                     row: fix.row,
@@ -209,7 +239,7 @@ impl Model {
                     row: fix.row,
                     axis: 2,
                     target: up,
-                    w: 1.0 / spec.sigma_vertical_m,
+                    w: 1.0 / fix_sigma(spec.sigma_vertical_m, fix.vacc, v_scale),
                     baro: false,
                     t: fix.t,
                 });

@@ -49,6 +49,11 @@ const HEADING_FIT_S: f64 = 180.0;
 const MIN_HEADING_SAMPLES: usize = 60;
 /// Consecutive fixes further apart than this are not used for a course (s).
 const MAX_FIX_GAP_S: f64 = 2.5;
+/// A slow vehicle's course chord spans at least this much odometer distance
+/// (m), so that GPS noise of a metre or two moves it by tens of degrees at most...
+const SLOW_CHORD_M: f64 = 5.0;
+/// ...within this long (s).
+const SLOW_CHORD_MAX_S: f64 = 20.0;
 
 fn wrap(a: f64) -> f64 {
     let two_pi = std::f64::consts::TAU;
@@ -88,22 +93,57 @@ impl StartGuess {
         let mut chord_sum = 0.0;
         let mut odo_sum = 0.0;
         let mut pairs = 0;
-        for w in sig.fixes.windows(2) {
-            let (a, b) = (&w[0], &w[1]);
+        // Odometer distance from the start at each fix.
+        let mut odo_at = Vec::with_capacity(sig.fixes.len());
+        let mut s_row = 0usize;
+        let mut s_cum = 0.0;
+        for f in &sig.fixes {
+            s_cum += sig.distance[(s_row + 1).min(f.row + 1)..=f.row]
+                .iter()
+                .sum::<f64>();
+            s_row = f.row;
+            odo_at.push(s_cum);
+        }
+        let fixes = &sig.fixes;
+        for k in 0..fixes.len().saturating_sub(1) {
+            let (a, b) = (&fixes[k], &fixes[k + 1]);
             if b.t - a.t > MAX_FIX_GAP_S {
                 continue;
             }
             pairs += 1;
-            let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
-            let chord = de.hypot(dn);
-            let odo: f64 = sig.distance[a.row + 1..=b.row].iter().sum();
+            let chord = (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1]);
+            let odo = odo_at[k + 1] - odo_at[k];
             chord_sum += chord;
             odo_sum += odo;
+            // A slow vehicle (under MIN_CHORD_M between fixes, but moving)
+            // takes its chord over as many fixes as SLOW_CHORD_M needs.
+            let end = if chord >= MIN_CHORD_M {
+                Some(k + 1)
+            } else if odo.abs() > 0.1 {
+                (k + 1..fixes.len())
+                    .take_while(|&m| {
+                        fixes[m].t - fixes[m - 1].t <= MAX_FIX_GAP_S
+                            && fixes[m].t - a.t <= SLOW_CHORD_MAX_S
+                    })
+                    .find(|&m| (odo_at[m] - odo_at[k]).abs() >= SLOW_CHORD_M)
+            } else {
+                None
+            };
+            let Some(m) = end else { continue };
+            let b = &fixes[m];
+            let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
+            let chord = de.hypot(dn);
             if chord < MIN_CHORD_M {
                 continue;
             }
+            // Driving backwards, the course is the heading turned round.
+            let reverse = if odo_at[m] < odo_at[k] {
+                std::f64::consts::PI
+            } else {
+                0.0
+            };
             let mid = (a.row + b.row) / 2;
-            samples.push((sig.t[mid] - t0, dn.atan2(de) - psi[mid], chord));
+            samples.push((sig.t[mid] - t0, dn.atan2(de) + reverse - psi[mid], chord));
         }
         // Only the start of the ride: over many minutes an error of a few
         // hundredths of a deg/s in the level-bias guess tilts the raw attitude

@@ -424,7 +424,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::loading::parse;
+    use crate::import::parse;
     use crate::signals::Signals;
 
     #[test]

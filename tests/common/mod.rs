@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use gyropath::loading::parse;
+use gyropath::import::parse;
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, SimulatedRide, simulate};
 

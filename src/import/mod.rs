@@ -1,0 +1,345 @@
+//! Every input format into one [`RideLog`]: the ride-log CSV (format:
+//! `data/ride-log-format.md`), ROS 1 bags, ROS 2 bags (MCAP, alone or in a
+//! rosbag2 folder) and CSV exports described by a small TOML map. Then the
+//! axes, units and datum are checked against the data ([`checks`]) and a
+//! sensor mounting is applied ([`mount`]).
+//!
+//! One file per source format; each reader only turns bytes into samples or
+//! rows. What is shared (sorting messages, joining streams on one timeline,
+//! integrating speed) lives in [`timeline`], so a new format is one new file.
+//! Every rejection names the file and, where there is one, the line and
+//! column or the topic; a bad input never panics and never loads half.
+
+pub mod checks;
+pub mod mapped_csv;
+pub mod mount;
+pub mod ride_csv;
+pub mod ros1;
+pub mod ros2;
+pub mod timeline;
+pub mod wire;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use thiserror::Error;
+
+pub use checks::{CheckReport, Level, Verdict};
+pub use mount::Mount;
+pub use ride_csv::{load_file, parse, parse_reader};
+pub use timeline::{TopicChoice, TopicInfo, Topics};
+
+/// Why an input could not be loaded.
+#[derive(Debug, Error)]
+pub enum LoadError {
+    #[error("{file}: cannot read: {source}")]
+    Io {
+        file: String,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{file}:{line}: column '{column}': {message}")]
+    Field {
+        file: String,
+        line: u64,
+        column: String,
+        message: String,
+    },
+    #[error("{file}:{line}: {message}")]
+    Line {
+        file: String,
+        line: u64,
+        message: String,
+    },
+    #[error("{file}: {message}")]
+    File { file: String, message: String },
+    /// A bag's record or message that cannot be decoded.
+    #[error("{file}: topic '{topic}': {message}")]
+    Topic {
+        file: String,
+        topic: String,
+        message: String,
+    },
+}
+
+/// Raw columns of a ride log, in the file's units.
+#[derive(Clone, Debug, Default)]
+pub struct RideLog {
+    /// Where it came from (for messages).
+    pub source: String,
+    /// `# key: value` comments before the header.
+    pub metadata: BTreeMap<String, String>,
+    /// 1-based line number of each data row in the file (for a bag: the row number).
+    pub line: Vec<u64>,
+    pub t_s: Vec<f64>,
+    /// Angular rate in deg/s, sensor frame (x forward, y left, z up once mounted).
+    pub gyro_dps: Vec<[f64; 3]>,
+    pub wheel_pulse: Option<Vec<bool>>,
+    pub odo_m: Option<Vec<Option<f64>>>,
+    /// Signed forward speed (m/s), an odometer alternative (integrated to distance).
+    pub speed_mps: Option<Vec<Option<f64>>>,
+    /// (lat, lon) in degrees, `None` where the row has no fix.
+    pub fix: Vec<Option<(f64, f64)>>,
+    pub gps_alt_m: Option<Vec<Option<f64>>>,
+    /// 1-sigma horizontal accuracy of the fix on this row (m).
+    pub gps_hacc_m: Option<Vec<Option<f64>>>,
+    /// 1-sigma vertical accuracy of the fix on this row (m).
+    pub gps_vacc_m: Option<Vec<Option<f64>>>,
+    pub baro_alt_m: Option<Vec<Option<f64>>>,
+    /// Specific force (m/s^2) in the same frame as the gyro, where logged.
+    pub accel_mps2: Option<Vec<Option<[f64; 3]>>>,
+    /// Extra numeric channels, by column name, in file order.
+    pub channels: Vec<(String, Vec<Option<f64>>)>,
+    /// Notes about the file that are not errors (dropped text columns, ...).
+    pub warnings: Vec<String>,
+}
+
+impl RideLog {
+    /// Give back the columns' growth slack (up to half of a long log's
+    /// memory) before the signals are derived from them.
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.line.shrink_to_fit();
+        self.t_s.shrink_to_fit();
+        self.gyro_dps.shrink_to_fit();
+        self.fix.shrink_to_fit();
+        for c in [
+            &mut self.odo_m,
+            &mut self.speed_mps,
+            &mut self.gps_alt_m,
+            &mut self.gps_hacc_m,
+            &mut self.gps_vacc_m,
+            &mut self.baro_alt_m,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            c.shrink_to_fit();
+        }
+        if let Some(p) = &mut self.wheel_pulse {
+            p.shrink_to_fit();
+        }
+        if let Some(a) = &mut self.accel_mps2 {
+            a.shrink_to_fit();
+        }
+        for (_, c) in &mut self.channels {
+            c.shrink_to_fit();
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Configured wheel circumference, when the metadata gives one.
+    pub fn wheel_circumference_m(&self) -> Option<&str> {
+        self.metadata
+            .get("wheel_circumference_m")
+            .map(String::as_str)
+    }
+
+    /// Number of GPS fixes.
+    pub fn fix_count(&self) -> usize {
+        self.fix.iter().filter(|f| f.is_some()).count()
+    }
+}
+
+/// The kind of an input, told by its content (magic bytes) before its name.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub enum SourceKind {
+    /// gyropath's own ride-log CSV.
+    RideCsv,
+    /// A ROS 1 bag (`#ROSBAG V2.0`).
+    Ros1Bag,
+    /// A ROS 2 bag: a bare MCAP file or a rosbag2 folder holding one.
+    Ros2Mcap,
+    /// Any CSV export, read through a TOML column map.
+    MappedCsv,
+}
+
+impl SourceKind {
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::RideCsv => "ride-log CSV",
+            Self::Ros1Bag => "ROS 1 bag",
+            Self::Ros2Mcap => "ROS 2 bag (MCAP)",
+            Self::MappedCsv => "mapped CSV",
+        }
+    }
+
+    /// Bags carry no mounting, so they are mounted by the checks unless told otherwise.
+    pub fn default_mount(self) -> MountChoice {
+        match self {
+            Self::Ros1Bag | Self::Ros2Mcap => MountChoice::Auto,
+            Self::RideCsv | Self::MappedCsv => MountChoice::AsLogged,
+        }
+    }
+}
+
+/// Which sensor mounting to apply on load.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum MountChoice {
+    /// The source's default: `Auto` for bags, `AsLogged` for CSV.
+    #[default]
+    Default,
+    /// The axes as the file has them.
+    AsLogged,
+    /// The mounting the checks recommend (as logged when they cannot tell).
+    Auto,
+    /// A mounting given by hand.
+    Fixed(Mount),
+}
+
+impl std::str::FromStr for MountChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "" | "default" => Ok(Self::Default),
+            "auto" => Ok(Self::Auto),
+            "none" | "as-logged" | "identity" => Ok(Self::AsLogged),
+            other => other.parse().map(Self::Fixed),
+        }
+    }
+}
+
+/// How to read an input.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImportOptions {
+    /// Topics of a bag (by message type when not given).
+    pub topics: TopicChoice,
+    pub mount: MountChoice,
+    /// TOML column map: the input is a mapped CSV.
+    pub map: Option<PathBuf>,
+    /// A second CSV with the GPS fixes of a mapped CSV, joined by time.
+    pub gps: Option<PathBuf>,
+}
+
+/// What was read, from where, and what the checks say of it.
+#[derive(Clone, Debug)]
+pub struct Imported {
+    pub log: RideLog,
+    pub kind: SourceKind,
+    /// The topics read and the candidates there were (bags only).
+    pub topics: Option<Topics>,
+    /// The mounting applied on load (`None`: as logged).
+    pub mount: Option<Mount>,
+    /// Verdicts on the data as read (before the mounting).
+    pub check: CheckReport,
+}
+
+impl Imported {
+    /// Every warning to show a user: the reader's, then the checks' that are not fine.
+    pub fn warnings(&self) -> Vec<String> {
+        let mut w = self.log.warnings.clone();
+        w.extend(self.check.warnings(self.mount.as_ref()));
+        w
+    }
+}
+
+/// Tell the kind of `path` by its content, then its name.
+pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadError> {
+    if options.map.is_some() {
+        return Ok(SourceKind::MappedCsv);
+    }
+    if path.is_dir() {
+        return Ok(SourceKind::Ros2Mcap);
+    }
+    let mut head = [0u8; 13];
+    let n = {
+        use std::io::Read;
+        let mut f = std::fs::File::open(path).map_err(|source| LoadError::Io {
+            file: path.display().to_string(),
+            source,
+        })?;
+        let mut n = 0;
+        while n < head.len() {
+            match f.read(&mut head[n..]) {
+                Ok(0) => break,
+                Ok(k) => n += k,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(source) => {
+                    return Err(LoadError::Io {
+                        file: path.display().to_string(),
+                        source,
+                    });
+                }
+            }
+        }
+        n
+    };
+    let head = &head[..n];
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    Ok(
+        if head.starts_with(ros1::MAGIC) || ext.as_deref() == Some("bag") {
+            SourceKind::Ros1Bag
+        } else if head.starts_with(ros2::MCAP_MAGIC) || ext.as_deref() == Some("mcap") {
+            SourceKind::Ros2Mcap
+        } else {
+            SourceKind::RideCsv
+        },
+    )
+}
+
+/// Read any supported input, check it, and mount it as `options` say.
+pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError> {
+    let kind = detect(path, options)?;
+    let (mut log, topics): (RideLog, Option<Topics>) = match kind {
+        SourceKind::RideCsv => (load_file(path)?, None),
+        SourceKind::Ros1Bag => {
+            let (rec, topics) = ros1::read(path, &options.topics)?;
+            (timeline::assemble(rec, &topics)?, Some(topics))
+        }
+        SourceKind::Ros2Mcap => {
+            let (rec, topics) = ros2::read(path, &options.topics)?;
+            (timeline::assemble(rec, &topics)?, Some(topics))
+        }
+        SourceKind::MappedCsv => {
+            let map = options.map.as_deref().ok_or_else(|| LoadError::File {
+                file: path.display().to_string(),
+                message: "a mapped CSV needs a column map (--map MAP.toml)".into(),
+            })?;
+            (mapped_csv::load(path, options.gps.as_deref(), map)?, None)
+        }
+    };
+    if topics.is_some() && !log.metadata.contains_key("source") {
+        log.metadata.insert(
+            "source".into(),
+            format!("{} {}", kind.label(), path.display()),
+        );
+    }
+    Ok(checked(log, kind, topics, &options.mount))
+}
+
+/// Check a log read by any reader and mount it as `mount` says.
+pub fn checked(
+    mut log: RideLog,
+    kind: SourceKind,
+    topics: Option<Topics>,
+    mount: &MountChoice,
+) -> Imported {
+    let check = checks::check(&log);
+    let choice = match mount {
+        MountChoice::Default => kind.default_mount(),
+        other => other.clone(),
+    };
+    let mount = match choice {
+        MountChoice::Default | MountChoice::AsLogged => None,
+        MountChoice::Auto => check.recommended.clone().filter(|m| !m.is_identity()),
+        MountChoice::Fixed(m) => Some(m).filter(|m| !m.is_identity()),
+    };
+    if let Some(m) = &mount {
+        m.apply(&mut log);
+    }
+    Imported {
+        log,
+        kind,
+        topics,
+        mount,
+        check,
+    }
+}

@@ -1,0 +1,813 @@
+//! The ride-log CSV (format: `data/ride-log-format.md`, version 1): read in
+//! three parts that each read on their own ([`read_metadata`] for the comment
+//! lines, [`Columns::bind`] for the header, [`RowReader`] for the rows), and
+//! written back by [`write`] (what `gyropath import` produces).
+//!
+//! The reader keeps the columns as read (units of the file, empty fields as
+//! `None`); everything derived from them lives in [`crate::signals`]. Every
+//! rejection names the file, the 1-based line and the column, and nothing is
+//! loaded from a bad file.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, Read, Write};
+use std::path::{Path, PathBuf};
+
+use super::{LoadError, RideLog};
+
+/// Load a ride log from a file.
+pub fn load_file(path: &Path) -> Result<RideLog, LoadError> {
+    let file = std::fs::File::open(path).map_err(|source| LoadError::Io {
+        file: path.display().to_string(),
+        source,
+    })?;
+    parse_reader(
+        std::io::BufReader::with_capacity(1 << 20, file),
+        &path.display().to_string(),
+    )
+}
+
+/// Load a ride log from a path given as a string (convenience for callers).
+pub fn load(path: impl Into<PathBuf>) -> Result<RideLog, LoadError> {
+    load_file(&path.into())
+}
+
+/// Parse a ride log held in memory; `source` names it in messages.
+pub fn parse(bytes: &[u8], source: &str) -> Result<RideLog, LoadError> {
+    parse_reader(bytes, source)
+}
+
+/// Parse a ride log read from `input` (streamed: a large file is never held
+/// in memory as text); `source` names it in errors.
+pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, LoadError> {
+    let head = read_metadata(&mut input, source)?;
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(true)
+        .flexible(false)
+        .trim(csv::Trim::All)
+        .from_reader(std::io::Cursor::new(head.header).chain(input));
+    let header_line = head.comment_lines + 1;
+    let headers = reader
+        .byte_headers()
+        .map_err(|e| LoadError::Line {
+            file: source.to_string(),
+            line: header_line,
+            message: format!("cannot read the header: {e}"),
+        })?
+        .clone();
+    let columns = Columns::bind(&headers, source, header_line)?;
+    check_circumference(&columns, &head.metadata, source)?;
+    let mut rows = RowReader::new(&columns, source, head.comment_lines, head.metadata);
+    let mut record = csv::ByteRecord::new();
+    while rows.read(&mut reader, &mut record)? {
+        rows.push(&record)?;
+    }
+    rows.finish()
+}
+
+/// The comment lines before the header, and the header line itself.
+struct Head {
+    metadata: BTreeMap<String, String>,
+    comment_lines: u64,
+    header: Vec<u8>,
+}
+
+/// Read the leading `#` lines (`# key: value` is metadata) up to the header.
+fn read_metadata(input: &mut impl BufRead, file: &str) -> Result<Head, LoadError> {
+    let mut metadata = BTreeMap::new();
+    let mut comment_lines = 0u64;
+    let mut line = Vec::new();
+    loop {
+        line.clear();
+        let read = input
+            .read_until(b'\n', &mut line)
+            .map_err(|e| LoadError::Line {
+                file: file.to_string(),
+                line: comment_lines + 1,
+                message: format!("cannot read: {e}"),
+            })?;
+        if read == 0 {
+            return Err(LoadError::File {
+                file: file.to_string(),
+                message: "no header row (the file holds no data)".into(),
+            });
+        }
+        if comment_lines == 0
+            && let Some(rest) = line.strip_prefix(b"\xEF\xBB\xBF")
+        {
+            line = rest.to_vec();
+        }
+        let trimmed = line.trim_ascii();
+        if !trimmed.is_empty() && trimmed[0] != b'#' {
+            return Ok(Head {
+                metadata,
+                comment_lines,
+                header: line,
+            });
+        }
+        if let Some(body) = trimmed.strip_prefix(b"#") {
+            let body = std::str::from_utf8(body).map_err(|_| LoadError::Line {
+                file: file.to_string(),
+                line: comment_lines + 1,
+                message: "comment is not valid UTF-8".into(),
+            })?;
+            if let Some((k, v)) = body.split_once(':') {
+                let key = k.trim();
+                if !key.is_empty() && !key.contains(' ') {
+                    metadata.insert(key.to_string(), v.trim().to_string());
+                }
+            }
+        }
+        comment_lines += 1;
+    }
+}
+
+/// The columns the format knows.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Known {
+    T,
+    Gx,
+    Gy,
+    Gz,
+    Pulse,
+    Odo,
+    Speed,
+    Lat,
+    Lon,
+    GpsAlt,
+    Hacc,
+    Vacc,
+    Baro,
+    Ax,
+    Ay,
+    Az,
+}
+
+/// Names of the known columns, in the order [`write`] writes them.
+const KNOWN: [(&str, Known); 16] = [
+    ("t_s", Known::T),
+    ("gx_dps", Known::Gx),
+    ("gy_dps", Known::Gy),
+    ("gz_dps", Known::Gz),
+    ("wheel_pulse", Known::Pulse),
+    ("odo_m", Known::Odo),
+    ("speed_mps", Known::Speed),
+    ("lat_deg", Known::Lat),
+    ("lon_deg", Known::Lon),
+    ("gps_alt_m", Known::GpsAlt),
+    ("gps_hacc_m", Known::Hacc),
+    ("gps_vacc_m", Known::Vacc),
+    ("baro_alt_m", Known::Baro),
+    ("ax_mps2", Known::Ax),
+    ("ay_mps2", Known::Ay),
+    ("az_mps2", Known::Az),
+];
+
+fn known(name: &str) -> Option<Known> {
+    KNOWN.iter().find(|(n, _)| *n == name).map(|&(_, k)| k)
+}
+
+/// Where each column sits in a row.
+struct Columns {
+    names: Vec<String>,
+    t: usize,
+    gyro: [usize; 3],
+    lat: usize,
+    lon: usize,
+    pulse: Option<usize>,
+    odo: Option<usize>,
+    speed: Option<usize>,
+    alt: Option<usize>,
+    hacc: Option<usize>,
+    vacc: Option<usize>,
+    baro: Option<usize>,
+    accel: Option<[usize; 3]>,
+    /// Columns the format does not know: extra channels.
+    extra: Vec<usize>,
+}
+
+impl Columns {
+    /// Bind the header's names to the format's columns.
+    fn bind(headers: &csv::ByteRecord, file: &str, line: u64) -> Result<Self, LoadError> {
+        let field_err = |column: &str, message: String| LoadError::Field {
+            file: file.to_string(),
+            line,
+            column: column.to_string(),
+            message,
+        };
+        let line_err = |message: String| LoadError::Line {
+            file: file.to_string(),
+            line,
+            message,
+        };
+        let mut names: Vec<String> = Vec::with_capacity(headers.len());
+        for (i, h) in headers.iter().enumerate() {
+            let name = std::str::from_utf8(h)
+                .map_err(|_| line_err(format!("header field {} is not valid UTF-8", i + 1)))?
+                .trim()
+                .to_string();
+            if name.is_empty() {
+                return Err(line_err(format!("header field {} is empty", i + 1)));
+            }
+            if names.contains(&name) {
+                return Err(field_err(
+                    &name,
+                    "column appears twice in the header".into(),
+                ));
+            }
+            names.push(name);
+        }
+        let find = |k: Known| names.iter().position(|n| known(n) == Some(k));
+        let require = |k: Known, name: &str| {
+            find(k)
+                .ok_or_else(|| field_err(name, "required column is missing from the header".into()))
+        };
+        let t = require(Known::T, "t_s")?;
+        let gyro = [
+            require(Known::Gx, "gx_dps")?,
+            require(Known::Gy, "gy_dps")?,
+            require(Known::Gz, "gz_dps")?,
+        ];
+        let lat = require(Known::Lat, "lat_deg")?;
+        let lon = require(Known::Lon, "lon_deg")?;
+        let (pulse, odo, speed) = (find(Known::Pulse), find(Known::Odo), find(Known::Speed));
+        if pulse.is_none() && odo.is_none() && speed.is_none() {
+            return Err(field_err(
+                "wheel_pulse",
+                "the log needs a distance column: 'wheel_pulse', 'odo_m' or 'speed_mps'".into(),
+            ));
+        }
+        let accel = match (find(Known::Ax), find(Known::Ay), find(Known::Az)) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            (None, None, None) => None,
+            (x, y, _) => {
+                let missing = if x.is_none() {
+                    "ax_mps2"
+                } else if y.is_none() {
+                    "ay_mps2"
+                } else {
+                    "az_mps2"
+                };
+                return Err(field_err(
+                    missing,
+                    "the accelerometer needs all three columns ax_mps2, ay_mps2, az_mps2".into(),
+                ));
+            }
+        };
+        let extra = (0..names.len())
+            .filter(|&i| known(&names[i]).is_none())
+            .collect();
+        Ok(Self {
+            t,
+            gyro,
+            lat,
+            lon,
+            pulse,
+            odo,
+            speed,
+            alt: find(Known::GpsAlt),
+            hacc: find(Known::Hacc),
+            vacc: find(Known::Vacc),
+            baro: find(Known::Baro),
+            accel,
+            extra,
+            names,
+        })
+    }
+}
+
+/// A log with `wheel_pulse` needs a positive `wheel_circumference_m`.
+fn check_circumference(
+    columns: &Columns,
+    metadata: &BTreeMap<String, String>,
+    file: &str,
+) -> Result<(), LoadError> {
+    if columns.pulse.is_none() {
+        return Ok(());
+    }
+    let err = |message: String| LoadError::File {
+        file: file.to_string(),
+        message,
+    };
+    match metadata.get("wheel_circumference_m") {
+        None => Err(err(
+            "the log has 'wheel_pulse' but no '# wheel_circumference_m: ...' metadata line".into(),
+        )),
+        Some(v) => match v.parse::<f64>() {
+            Ok(c) if c.is_finite() && c > 0.0 => Ok(()),
+            _ => Err(err(format!(
+                "metadata 'wheel_circumference_m' must be a positive number of metres, got '{v}'"
+            ))),
+        },
+    }
+}
+
+/// Parses rows one at a time into the columns of a [`RideLog`].
+struct RowReader<'c> {
+    columns: &'c Columns,
+    file: String,
+    comment_lines: u64,
+    log: RideLog,
+    /// Per extra column: `Some(true)` numeric, `Some(false)` text (dropped), `None` not yet known.
+    extra_numeric: Vec<Option<bool>>,
+    extra_values: Vec<Vec<Option<f64>>>,
+    prev_t: f64,
+}
+
+impl<'c> RowReader<'c> {
+    fn new(
+        columns: &'c Columns,
+        file: &str,
+        comment_lines: u64,
+        metadata: BTreeMap<String, String>,
+    ) -> Self {
+        fn some_if<T>(c: Option<usize>) -> Option<Vec<T>> {
+            c.map(|_| Vec::new())
+        }
+        let log = RideLog {
+            source: file.to_string(),
+            metadata,
+            wheel_pulse: some_if(columns.pulse),
+            odo_m: some_if(columns.odo),
+            speed_mps: some_if(columns.speed),
+            gps_alt_m: some_if(columns.alt),
+            gps_hacc_m: some_if(columns.hacc),
+            gps_vacc_m: some_if(columns.vacc),
+            baro_alt_m: some_if(columns.baro),
+            accel_mps2: columns.accel.map(|_| Vec::new()),
+            ..RideLog::default()
+        };
+        Self {
+            columns,
+            file: file.to_string(),
+            comment_lines,
+            log,
+            extra_numeric: vec![None; columns.extra.len()],
+            extra_values: vec![Vec::new(); columns.extra.len()],
+            prev_t: f64::NEG_INFINITY,
+        }
+    }
+
+    /// Read the next record; `false` at the end of the input.
+    fn read(
+        &self,
+        reader: &mut csv::Reader<impl Read>,
+        record: &mut csv::ByteRecord,
+    ) -> Result<bool, LoadError> {
+        reader.read_byte_record(record).map_err(|e| {
+            let line = e
+                .position()
+                .map_or(self.comment_lines + 1, |p| p.line() + self.comment_lines);
+            let message = match e.kind() {
+                csv::ErrorKind::UnequalLengths {
+                    expected_len, len, ..
+                } => format!("row has {len} fields, the header has {expected_len}"),
+                _ => format!("cannot read the row: {e}"),
+            };
+            LoadError::Line {
+                file: self.file.clone(),
+                line,
+                message,
+            }
+        })
+    }
+
+    fn field_err(&self, line: u64, column: &str, message: String) -> LoadError {
+        LoadError::Field {
+            file: self.file.clone(),
+            line,
+            column: column.to_string(),
+            message,
+        }
+    }
+
+    /// Parse one row into the log.
+    fn push(&mut self, record: &csv::ByteRecord) -> Result<(), LoadError> {
+        let c = self.columns;
+        let line = record.position().map_or(0, |p| p.line()) + self.comment_lines;
+        let row = Row {
+            record,
+            line,
+            reader: self,
+        };
+        let t = row.required(c.t)?;
+        if t <= self.prev_t {
+            return Err(self.field_err(
+                line,
+                "t_s",
+                format!("time {t} does not increase (previous row {})", self.prev_t),
+            ));
+        }
+        let g = [
+            row.required(c.gyro[0])?,
+            row.required(c.gyro[1])?,
+            row.required(c.gyro[2])?,
+        ];
+        let fix = row.fix()?;
+        let pulse = match c.pulse {
+            Some(i) => Some(match row.text(i)? {
+                "0" => false,
+                "1" => true,
+                "" => self
+                    .log
+                    .wheel_pulse
+                    .as_ref()
+                    .and_then(|v| v.last().copied())
+                    .unwrap_or(false),
+                s => {
+                    return Err(self.field_err(
+                        line,
+                        "wheel_pulse",
+                        format!("'{s}' is not 0 or 1"),
+                    ));
+                }
+            }),
+            None => None,
+        };
+        let optional = |i: Option<usize>| i.map(|i| row.number(i)).transpose();
+        let odo = optional(c.odo)?;
+        let speed = optional(c.speed)?;
+        let alt = optional(c.alt)?;
+        let baro = optional(c.baro)?;
+        let hacc = row.accuracy(c.hacc)?;
+        let vacc = row.accuracy(c.vacc)?;
+        let accel = match c.accel {
+            Some(a) => Some(
+                match (row.number(a[0])?, row.number(a[1])?, row.number(a[2])?) {
+                    (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+                    _ => None,
+                },
+            ),
+            None => None,
+        };
+        let extra = self.extra_row(record, line)?;
+        let log = &mut self.log;
+        for (column, value) in [
+            (&mut log.odo_m, odo),
+            (&mut log.speed_mps, speed),
+            (&mut log.gps_alt_m, alt),
+            (&mut log.baro_alt_m, baro),
+            (&mut log.gps_hacc_m, hacc),
+            (&mut log.gps_vacc_m, vacc),
+        ] {
+            if let (Some(col), Some(v)) = (column.as_mut(), value) {
+                col.push(v);
+            }
+        }
+        if let (Some(col), Some(p)) = (log.wheel_pulse.as_mut(), pulse) {
+            col.push(p);
+        }
+        if let (Some(col), Some(a)) = (log.accel_mps2.as_mut(), accel) {
+            col.push(a);
+        }
+        for (values, v) in self.extra_values.iter_mut().zip(extra) {
+            if let Some(v) = v {
+                values.push(v);
+            }
+        }
+        log.line.push(line);
+        log.t_s.push(t);
+        log.gyro_dps.push(g);
+        log.fix.push(fix);
+        self.prev_t = t;
+        Ok(())
+    }
+
+    /// The extra columns of a row: `Some(value)` for a numeric column, `None` for a dropped one.
+    fn extra_row(
+        &mut self,
+        record: &csv::ByteRecord,
+        line: u64,
+    ) -> Result<Vec<Option<Option<f64>>>, LoadError> {
+        let mut out = Vec::with_capacity(self.columns.extra.len());
+        for (k, &c) in self.columns.extra.iter().enumerate() {
+            let name = &self.columns.names[c];
+            let s = std::str::from_utf8(&record[c])
+                .map_err(|_| self.field_err(line, name, "value is not valid UTF-8".into()))?;
+            out.push(match self.extra_numeric[k] {
+                Some(false) => None,
+                _ if s.is_empty() => Some(None),
+                numeric => match s.parse::<f64>() {
+                    Ok(v) if v.is_finite() => {
+                        self.extra_numeric[k] = Some(true);
+                        Some(Some(v))
+                    }
+                    Ok(_) => {
+                        return Err(self.field_err(
+                            line,
+                            name,
+                            format!("'{s}' is not a finite number"),
+                        ));
+                    }
+                    Err(_) if numeric == Some(true) => {
+                        return Err(self.field_err(line, name, format!("'{s}' is not a number")));
+                    }
+                    Err(_) => {
+                        self.extra_numeric[k] = Some(false);
+                        self.log.warnings.push(format!(
+                            "{}:{line}: column '{name}' holds text ('{s}'); it is ignored",
+                            self.file
+                        ));
+                        None
+                    }
+                },
+            });
+        }
+        Ok(out)
+    }
+
+    /// The log, once every row is read.
+    fn finish(mut self) -> Result<RideLog, LoadError> {
+        if self.log.t_s.is_empty() {
+            return Err(LoadError::File {
+                file: self.file,
+                message: "the log has a header but no data rows".into(),
+            });
+        }
+        for (k, &c) in self.columns.extra.iter().enumerate() {
+            if self.extra_numeric[k] != Some(false) {
+                self.log.channels.push((
+                    self.columns.names[c].clone(),
+                    std::mem::take(&mut self.extra_values[k]),
+                ));
+            }
+        }
+        self.log.shrink_to_fit();
+        Ok(self.log)
+    }
+}
+
+/// One record being parsed, with its line for messages.
+struct Row<'a, 'c> {
+    record: &'a csv::ByteRecord,
+    line: u64,
+    reader: &'a RowReader<'c>,
+}
+
+impl Row<'_, '_> {
+    fn name(&self, i: usize) -> &str {
+        &self.reader.columns.names[i]
+    }
+
+    fn text(&self, i: usize) -> Result<&str, LoadError> {
+        std::str::from_utf8(&self.record[i]).map_err(|_| {
+            self.reader
+                .field_err(self.line, self.name(i), "value is not valid UTF-8".into())
+        })
+    }
+
+    /// A finite number, or `None` for an empty field.
+    fn number(&self, i: usize) -> Result<Option<f64>, LoadError> {
+        let s = self.text(i)?;
+        if s.is_empty() {
+            return Ok(None);
+        }
+        match s.parse::<f64>() {
+            Ok(v) if v.is_finite() => Ok(Some(v)),
+            Ok(_) => Err(self.reader.field_err(
+                self.line,
+                self.name(i),
+                format!("'{s}' is not a finite number"),
+            )),
+            Err(_) => Err(self.reader.field_err(
+                self.line,
+                self.name(i),
+                format!("'{s}' is not a number"),
+            )),
+        }
+    }
+
+    fn required(&self, i: usize) -> Result<f64, LoadError> {
+        self.number(i)?.ok_or_else(|| {
+            self.reader.field_err(
+                self.line,
+                self.name(i),
+                "value is empty but the column needs one on every row".into(),
+            )
+        })
+    }
+
+    /// A 1-sigma accuracy: positive where given.
+    fn accuracy(&self, i: Option<usize>) -> Result<Option<Option<f64>>, LoadError> {
+        let Some(i) = i else { return Ok(None) };
+        match self.number(i)? {
+            Some(v) if v <= 0.0 => Err(self.reader.field_err(
+                self.line,
+                self.name(i),
+                format!("{v} is not a positive accuracy in metres"),
+            )),
+            v => Ok(Some(v)),
+        }
+    }
+
+    /// The fix on this row: both coordinates or neither, within range.
+    fn fix(&self) -> Result<Option<(f64, f64)>, LoadError> {
+        let c = self.reader.columns;
+        let err = |column: &str, m: String| self.reader.field_err(self.line, column, m);
+        match (self.number(c.lat)?, self.number(c.lon)?) {
+            (Some(la), Some(lo)) => {
+                if !(-90.0..=90.0).contains(&la) {
+                    return Err(err("lat_deg", format!("{la} is outside -90..90")));
+                }
+                if !(-180.0..=360.0).contains(&lo) {
+                    return Err(err("lon_deg", format!("{lo} is outside -180..360")));
+                }
+                Ok(Some((la, lo)))
+            }
+            (None, None) => Ok(None),
+            (Some(_), None) => Err(err("lon_deg", "empty while lat_deg has a value".into())),
+            (None, Some(_)) => Err(err("lat_deg", "empty while lon_deg has a value".into())),
+        }
+    }
+}
+
+/// Write `log` as a ride-log CSV: metadata comments, then the columns it has
+/// (numbers in Rust's shortest round-trip form, so reading it back gives the
+/// same values to the bit).
+pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
+    writeln!(w, "# gyropath ride log")?;
+    for (k, v) in &log.metadata {
+        writeln!(w, "# {k}: {}", v.replace('\n', " "))?;
+    }
+    let opt = |c: &Option<Vec<Option<f64>>>, i: usize| -> String {
+        c.as_ref()
+            .and_then(|v| v[i])
+            .map_or(String::new(), |x| x.to_string())
+    };
+    let mut header: Vec<&str> = vec!["t_s", "gx_dps", "gy_dps", "gz_dps"];
+    let optional_columns: [(&str, &Option<Vec<Option<f64>>>); 3] = [
+        ("odo_m", &log.odo_m),
+        ("speed_mps", &log.speed_mps),
+        ("gps_alt_m", &log.gps_alt_m),
+    ];
+    if log.wheel_pulse.is_some() {
+        header.push("wheel_pulse");
+    }
+    for (name, c) in &optional_columns[..2] {
+        if c.is_some() {
+            header.push(name);
+        }
+    }
+    header.extend(["lat_deg", "lon_deg"]);
+    let late: [(&str, &Option<Vec<Option<f64>>>); 4] = [
+        ("gps_alt_m", &log.gps_alt_m),
+        ("gps_hacc_m", &log.gps_hacc_m),
+        ("gps_vacc_m", &log.gps_vacc_m),
+        ("baro_alt_m", &log.baro_alt_m),
+    ];
+    for (name, c) in &late {
+        if c.is_some() {
+            header.push(name);
+        }
+    }
+    if log.accel_mps2.is_some() {
+        header.extend(["ax_mps2", "ay_mps2", "az_mps2"]);
+    }
+    let mut header = header.join(",");
+    for (name, _) in &log.channels {
+        header.push(',');
+        header.push_str(name);
+    }
+    writeln!(w, "{header}")?;
+    let mut line = String::with_capacity(256);
+    for i in 0..log.len() {
+        use std::fmt::Write as _;
+        line.clear();
+        let g = log.gyro_dps[i];
+        let _ = write!(line, "{},{},{},{}", log.t_s[i], g[0], g[1], g[2]);
+        if let Some(p) = &log.wheel_pulse {
+            line.push_str(if p[i] { ",1" } else { ",0" });
+        }
+        for (_, c) in &optional_columns[..2] {
+            if c.is_some() {
+                let _ = write!(line, ",{}", opt(c, i));
+            }
+        }
+        match log.fix[i] {
+            Some((la, lo)) => {
+                let _ = write!(line, ",{la},{lo}");
+            }
+            None => line.push_str(",,"),
+        }
+        for (_, c) in &late {
+            if c.is_some() {
+                let _ = write!(line, ",{}", opt(c, i));
+            }
+        }
+        if let Some(a) = &log.accel_mps2 {
+            match a[i] {
+                Some([x, y, z]) => {
+                    let _ = write!(line, ",{x},{y},{z}");
+                }
+                None => line.push_str(",,,"),
+            }
+        }
+        for (_, c) in &log.channels {
+            let _ = write!(line, ",{}", c[i].map_or(String::new(), |x| x.to_string()));
+        }
+        writeln!(w, "{line}")?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = "# gyropath ride log\n# wheel_circumference_m: 2.1180\nt_s,gx_dps,gy_dps,gz_dps,wheel_pulse,lat_deg,lon_deg,gps_alt_m,baro_alt_m,temp_c\n0.00,0.12250,-0.31500,0.28000,0,47.49788883,19.04019799,95.9,136.08,16.7\n0.01,0.17500,0.00875,0.23625,0,,,,136.01,16.6\n0.02,0.16625,-0.04375,0.19250,1,,,,136.05,16.6\n";
+
+    #[test]
+    fn reads_the_spec_example() {
+        let log = parse(GOOD.as_bytes(), "ex.csv").unwrap();
+        assert_eq!(log.len(), 3);
+        assert_eq!(log.wheel_circumference_m(), Some("2.1180"));
+        assert_eq!(log.line, vec![4, 5, 6]);
+        assert_eq!(log.fix[0], Some((47.49788883, 19.04019799)));
+        assert_eq!(log.fix[1], None);
+        assert_eq!(log.wheel_pulse.as_ref().unwrap(), &vec![false, false, true]);
+        assert_eq!(log.channels.len(), 1);
+        assert_eq!(log.channels[0].0, "temp_c");
+        assert_eq!(log.channels[0].1[2], Some(16.6));
+        assert_eq!(log.baro_alt_m.as_ref().unwrap()[1], Some(136.01));
+    }
+
+    fn err(text: &str) -> String {
+        parse(text.as_bytes(), "bad.csv").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn bad_inputs_name_file_line_and_column() {
+        let e = err(&GOOD.replace("0.17500", "abc"));
+        assert_eq!(e, "bad.csv:5: column 'gx_dps': 'abc' is not a number");
+        let e = err(&GOOD.replace("0.17500", "NaN"));
+        assert!(e.starts_with("bad.csv:5: column 'gx_dps'"), "{e}");
+        let e = err(&GOOD.replace("0.02,", "0.01,"));
+        assert!(
+            e.starts_with("bad.csv:6: column 't_s': time 0.01 does not increase"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("gz_dps,", "gq_dps,"));
+        assert!(
+            e.contains("bad.csv:3: column 'gz_dps': required column is missing"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace(",136.01,16.6", ",136.01"));
+        assert!(e.starts_with("bad.csv:5:") && e.contains("fields"), "{e}");
+        let e = err(&GOOD.replace("# wheel_circumference_m: 2.1180\n", ""));
+        assert!(e.contains("wheel_circumference_m"), "{e}");
+        let e = err(&GOOD.replace(",1,,,", ",2,,,"));
+        assert!(e.starts_with("bad.csv:6: column 'wheel_pulse'"), "{e}");
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "47.49788883,"));
+        assert!(e.starts_with("bad.csv:4: column 'lon_deg'"), "{e}");
+        let e = err("# only comments\n");
+        assert!(e.contains("no header"), "{e}");
+        let e = err(GOOD.split("0.00,").next().unwrap());
+        assert!(e.contains("no data rows"), "{e}");
+    }
+
+    #[test]
+    fn text_extra_columns_are_dropped_with_a_warning() {
+        let text = GOOD
+            .replace("temp_c\n", "temp_c,note\n")
+            .replace(",16.7\n", ",16.7,start\n")
+            .replace(",16.6\n", ",16.6,x\n");
+        let log = parse(text.as_bytes(), "n.csv").unwrap();
+        assert_eq!(log.channels.len(), 1);
+        assert_eq!(log.warnings.len(), 1);
+    }
+
+    const NEW_COLUMNS: &str = "t_s,gx_dps,gy_dps,gz_dps,speed_mps,lat_deg,lon_deg,gps_hacc_m,gps_vacc_m,ax_mps2,ay_mps2,az_mps2\n0,0.1,0.2,0.3,1.5,47.5,19.0,2.5,4.0,0.1,0.2,9.8\n0.01,0.1,0.2,0.3,1.6,,,,,0.1,0.2,9.7\n";
+
+    #[test]
+    fn reads_accuracy_speed_and_accelerometer_columns() {
+        let log = parse(NEW_COLUMNS.as_bytes(), "new.csv").unwrap();
+        assert_eq!(log.speed_mps.as_ref().unwrap(), &vec![Some(1.5), Some(1.6)]);
+        assert_eq!(log.gps_hacc_m.as_ref().unwrap(), &vec![Some(2.5), None]);
+        assert_eq!(log.gps_vacc_m.as_ref().unwrap()[0], Some(4.0));
+        assert_eq!(log.accel_mps2.as_ref().unwrap()[1], Some([0.1, 0.2, 9.7]));
+        let e = err(&NEW_COLUMNS.replace(",2.5,", ",-1,"));
+        assert!(e.starts_with("bad.csv:2: column 'gps_hacc_m'"), "{e}");
+        let e = err(&NEW_COLUMNS.replace(",ay_mps2", ",ay"));
+        assert!(e.contains("column 'ay_mps2'"), "{e}");
+    }
+
+    #[test]
+    fn what_is_written_reads_back_the_same() {
+        for text in [GOOD, NEW_COLUMNS] {
+            let log = parse(text.as_bytes(), "a.csv").unwrap();
+            let mut out = Vec::new();
+            write(&log, &mut out).unwrap();
+            let back = parse(&out, "b.csv").unwrap();
+            assert_eq!(back.t_s, log.t_s);
+            assert_eq!(back.gyro_dps, log.gyro_dps);
+            assert_eq!(back.fix, log.fix);
+            assert_eq!(back.wheel_pulse, log.wheel_pulse);
+            assert_eq!(back.speed_mps, log.speed_mps);
+            assert_eq!(back.gps_alt_m, log.gps_alt_m);
+            assert_eq!(back.gps_hacc_m, log.gps_hacc_m);
+            assert_eq!(back.baro_alt_m, log.baro_alt_m);
+            assert_eq!(back.accel_mps2, log.accel_mps2);
+            assert_eq!(back.channels, log.channels);
+            assert_eq!(back.metadata, log.metadata);
+        }
+    }
+}

@@ -1,0 +1,252 @@
+//! ROS 2 bags: a rosbag2 folder (`metadata.yaml` beside its storage files) or
+//! a bare `.mcap`. MCAP is streamed through the `mcap` crate's sans-io linear
+//! reader (zstd and lz4 chunks decompressed one at a time), so memory is
+//! bounded by the messages kept and one chunk, never by the bag; messages are
+//! CDR, decoded by [`super::wire`].
+
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+
+use super::LoadError;
+use super::timeline::{Recording, TopicChoice, Topics};
+
+/// The first bytes of every MCAP file.
+pub const MCAP_MAGIC: &[u8] = b"\x89MCAP0\r\n";
+
+/// Largest record accepted outside chunks (a corrupt length must not allocate gigabytes).
+const MAX_RECORD: usize = 1 << 30;
+
+/// Read a rosbag2 folder or an MCAP file.
+pub fn read(path: &Path, choice: &TopicChoice) -> Result<(Recording, Topics), LoadError> {
+    let files = if path.is_dir() {
+        storage_files(path)?
+    } else {
+        vec![path.to_path_buf()]
+    };
+    let source = path.display().to_string();
+    let mut rec = Recording::new(&source);
+    for f in &files {
+        let file = f.display().to_string();
+        let input = std::fs::File::open(f).map_err(|source| LoadError::Io {
+            file: file.clone(),
+            source,
+        })?;
+        read_mcap(
+            std::io::BufReader::with_capacity(1 << 20, input),
+            &file,
+            &mut rec,
+            choice,
+        )?;
+    }
+    let topics = rec.choose(choice)?;
+    Ok((rec, topics))
+}
+
+/// The storage files of a rosbag2 folder: those `metadata.yaml` lists under
+/// `relative_file_paths`, else every `.mcap` in it; a `.db3` (SQLite) bag is refused by name.
+fn storage_files(dir: &Path) -> Result<Vec<PathBuf>, LoadError> {
+    let folder = dir.display().to_string();
+    let err = |message: String| LoadError::File {
+        file: folder.clone(),
+        message,
+    };
+    let meta = dir.join("metadata.yaml");
+    let mut files = Vec::new();
+    if let Ok(text) = std::fs::read_to_string(&meta) {
+        let mut listing = false;
+        for line in text.lines() {
+            let trimmed = line.trim();
+            if trimmed.starts_with("relative_file_paths:") {
+                listing = true;
+                continue;
+            }
+            if listing {
+                match trimmed.strip_prefix("- ") {
+                    Some(name) => files.push(dir.join(name.trim().trim_matches(['"', '\'']))),
+                    None => listing = false,
+                }
+            }
+        }
+        if text.contains("storage_identifier: sqlite3") {
+            return Err(err(
+                "a rosbag2 folder in SQLite storage (.db3); gyropath reads MCAP storage: convert with `ros2 bag convert` to mcap".into(),
+            ));
+        }
+    }
+    if files.is_empty() {
+        let listed = std::fs::read_dir(dir).map_err(|source| LoadError::Io {
+            file: folder.clone(),
+            source,
+        })?;
+        files = listed
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.extension()
+                    .is_some_and(|x| x.eq_ignore_ascii_case("mcap"))
+            })
+            .collect();
+        files.sort();
+    }
+    if files.is_empty() {
+        return Err(err(
+            "neither a rosbag2 folder with MCAP storage nor a folder holding .mcap files".into(),
+        ));
+    }
+    for f in &files {
+        if !f.is_file() {
+            return Err(err(format!(
+                "metadata.yaml lists '{}', which is not in the folder",
+                f.display()
+            )));
+        }
+        if f.extension().is_some_and(|x| x.eq_ignore_ascii_case("db3")) {
+            return Err(err(format!(
+                "'{}' is SQLite storage; gyropath reads MCAP storage: convert with `ros2 bag convert`",
+                f.display()
+            )));
+        }
+    }
+    Ok(files)
+}
+
+/// A channel: its topic, message type and encoding.
+struct Channel {
+    topic: String,
+    type_name: String,
+    cdr: bool,
+}
+
+/// Stream one MCAP file's messages into `rec`.
+pub fn read_mcap(
+    mut input: impl Read,
+    file: &str,
+    rec: &mut Recording,
+    choice: &TopicChoice,
+) -> Result<(), LoadError> {
+    let corrupt = |e: &dyn std::fmt::Display| LoadError::File {
+        file: file.to_string(),
+        message: format!("not a readable MCAP file: {e}"),
+    };
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_record_length_limit(MAX_RECORD),
+    );
+    let mut schemas: HashMap<u16, String> = HashMap::new();
+    let mut channels: HashMap<u16, Channel> = HashMap::new();
+    while let Some(event) = reader.next_event() {
+        match event.map_err(|e| corrupt(&e))? {
+            LinearReadEvent::ReadRequest(need) => {
+                let buf = reader.insert(need);
+                let n = loop {
+                    match input.read(buf) {
+                        Ok(n) => break n,
+                        Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                        Err(source) => {
+                            return Err(LoadError::Io {
+                                file: file.to_string(),
+                                source,
+                            });
+                        }
+                    }
+                };
+                reader.notify_read(n);
+            }
+            LinearReadEvent::Record { data, opcode } => {
+                match mcap::parse_record(opcode, data).map_err(|e| corrupt(&e))? {
+                    mcap::records::Record::Schema { header, .. } => {
+                        schemas.insert(header.id, header.name);
+                    }
+                    mcap::records::Record::Channel(c) => {
+                        let type_name = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                        rec.add_topic(&c.topic, &type_name);
+                        channels.insert(
+                            c.id,
+                            Channel {
+                                topic: c.topic,
+                                type_name,
+                                cdr: c.message_encoding == "cdr",
+                            },
+                        );
+                    }
+                    mcap::records::Record::Message { header, data } => {
+                        let Some(c) = channels.get(&header.channel_id) else {
+                            return Err(corrupt(&format!(
+                                "a message on channel {}, which no channel record declares",
+                                header.channel_id
+                            )));
+                        };
+                        if !c.cdr {
+                            continue;
+                        }
+                        let log_ns = i64::try_from(header.log_time).unwrap_or(i64::MAX);
+                        rec.push_cdr(&c.topic, &c.type_name, &data, log_ns, choice)?;
+                    }
+                    _ => {}
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Writes small MCAP files of CDR messages (for tests and benchmarks).
+pub struct McapWriter<W: std::io::Write + std::io::Seek> {
+    writer: mcap::Writer<W>,
+    channels: HashMap<String, u16>,
+    sequence: u32,
+}
+
+impl<W: std::io::Write + std::io::Seek> McapWriter<W> {
+    /// A writer whose chunks are compressed with zstd (as `ros2 bag record` does) or not at all.
+    pub fn new(out: W, zstd: bool) -> Result<Self, mcap::McapError> {
+        let writer = mcap::WriteOptions::new()
+            .compression(zstd.then_some(mcap::Compression::Zstd))
+            .profile("ros2")
+            .create(out)?;
+        Ok(Self {
+            writer,
+            channels: HashMap::new(),
+            sequence: 0,
+        })
+    }
+
+    /// Write a CDR message on `topic` of ROS 2 type `type_name` (`pkg/msg/Type`).
+    pub fn message(
+        &mut self,
+        topic: &str,
+        type_name: &str,
+        t_ns: u64,
+        data: &[u8],
+    ) -> Result<(), mcap::McapError> {
+        let id = match self.channels.get(topic) {
+            Some(&id) => id,
+            None => {
+                let schema = self.writer.add_schema(type_name, "ros2msg", b"")?;
+                let id = self.writer.add_channel(
+                    schema,
+                    topic,
+                    "cdr",
+                    &std::collections::BTreeMap::new(),
+                )?;
+                self.channels.insert(topic.to_string(), id);
+                id
+            }
+        };
+        self.sequence += 1;
+        self.writer.write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: id,
+                sequence: self.sequence,
+                log_time: t_ns,
+                publish_time: t_ns,
+            },
+            data,
+        )
+    }
+
+    pub fn finish(mut self) -> Result<(), mcap::McapError> {
+        self.writer.finish().map(|_| ())
+    }
+}
