@@ -288,6 +288,8 @@ fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>,
 }
 
 /// Per-step distance from a cumulative odometer; empty fields are interpolated.
+/// Signed: an odometer that counts down is reversing (the path moves
+/// backwards), and the sub-millimetre jitter of one at a standstill is noise.
 fn distance_from_odometer(odo: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>, SignalError> {
     if odo.iter().all(Option::is_none) {
         return Err(SignalError::Field {
@@ -300,20 +302,7 @@ fn distance_from_odometer(odo: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>
     let filled = fill_gaps(odo);
     let mut d = vec![0.0; filled.len()];
     for j in 1..filled.len() {
-        let step = filled[j] - filled[j - 1];
-        if step < -1e-6 {
-            return Err(SignalError::Field {
-                file: log.source.clone(),
-                line: log.line[j],
-                column: "odo_m".into(),
-                message: format!(
-                    "cumulative distance decreases ({} after {})",
-                    filled[j],
-                    filled[j - 1]
-                ),
-            });
-        }
-        d[j] = step.max(0.0);
+        d[j] = filled[j] - filled[j - 1];
     }
     Ok(d)
 }

@@ -4,6 +4,8 @@
 //! joined on one timeline by [`super::timeline::join`], as bags are.
 //!
 //! ```toml
+//! channels = ["temp_c"]        # extra columns to keep (top level: before the first table)
+//!
 //! [time]
 //! column = "seconds_elapsed"   # required
 //! unit = "s"                   # s, ms, us or ns
@@ -34,8 +36,6 @@
 //! hacc = "horizontalAccuracy"  # optional, 1-sigma m
 //! vacc = "verticalAccuracy"    # optional
 //! time = "seconds_elapsed"     # the GPS file's time column (default: [time] column)
-//!
-//! channels = ["temp_c"]        # extra columns to keep (top level)
 //! ```
 
 use std::collections::BTreeMap;

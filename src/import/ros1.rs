@@ -250,7 +250,7 @@ fn decompress(
         return Err(format!("a chunk of {size} bytes"));
     }
     out.clear();
-    out.reserve(size);
+    out.reserve(size.min(1 << 26));
     let limit = size as u64 + 1;
     let got = match compression {
         "none" => {

@@ -660,7 +660,7 @@ mod tests {
         assert!(
             log.warnings
                 .iter()
-                .any(|w| w.contains("1 message(s) out of order")
+                .any(|w| w.contains("2 message(s) out of order")
                     && w.contains("1 with a repeated stamp")),
             "{:?}",
             log.warnings

@@ -1,0 +1,191 @@
+//! Bags are untrusted input: truncated files, corrupt chunks, wrong message
+//! types and missing topics give a clear error naming the file (and the topic
+//! where there is one), never a panic or a hang.
+
+use std::io::Cursor;
+
+use gyropath::import::ros1::{self, BagWriter};
+use gyropath::import::ros2::{self, McapWriter};
+use gyropath::import::timeline::{Recording, TopicChoice};
+use gyropath::import::wire::Writer;
+use proptest::prelude::*;
+
+const HUSKY_BAG: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/real/robot_localization-test1/test1.bag"
+);
+
+/// A minute of a small robot: IMU 20 Hz, odometry 10 Hz, fixes 1 Hz.
+fn messages() -> Vec<(&'static str, &'static str, f64, Vec<u8>, Vec<u8>)> {
+    let mut out = Vec::new();
+    for i in 0..1200 {
+        let t = 1000.0 + i as f64 * 0.05;
+        let (g, a) = ([0.0, 0.0, 0.1], [0.0, 0.0, 9.81]);
+        out.push((
+            "/imu",
+            "sensor_msgs/Imu",
+            t,
+            Writer::ros1().imu(t, g, a),
+            Writer::cdr().imu(t, g, a),
+        ));
+        if i % 2 == 0 {
+            out.push((
+                "/odom",
+                "nav_msgs/Odometry",
+                t,
+                Writer::ros1().odometry(t, 1.0),
+                Writer::cdr().odometry(t, 1.0),
+            ));
+        }
+        if i % 20 == 10 {
+            let lon = -71.0 + 1e-5 * i as f64;
+            out.push((
+                "/fix",
+                "sensor_msgs/NavSatFix",
+                t,
+                Writer::ros1().fix(t, 42.0, lon, 4.0),
+                Writer::cdr().fix(t, 42.0, lon, 4.0),
+            ));
+        }
+    }
+    out
+}
+
+fn ros1_bag() -> Vec<u8> {
+    let mut bag = BagWriter::new();
+    for (topic, ty, t, data, _) in messages() {
+        bag.message(topic, ty, t, &data);
+    }
+    bag.bytes
+}
+
+fn mcap(skip_imu: bool, zstd: bool) -> Vec<u8> {
+    let mut buf = Cursor::new(Vec::new());
+    let mut w = McapWriter::new(&mut buf, zstd).unwrap();
+    for (topic, ty, t, _, data) in messages() {
+        if skip_imu && topic == "/imu" {
+            continue;
+        }
+        let ty2 = ty.replace('/', "/msg/");
+        w.message(topic, &ty2, (t * 1e9) as u64, &data).unwrap();
+    }
+    w.finish().unwrap();
+    buf.into_inner()
+}
+
+fn read_ros1(bytes: &[u8]) -> Result<usize, String> {
+    let choice = TopicChoice::default();
+    let (rec, topics) = ros1::read_from(bytes, "fuzz.bag", &choice).map_err(|e| e.to_string())?;
+    let log = gyropath::import::timeline::assemble(rec, &topics).map_err(|e| e.to_string())?;
+    Ok(log.len())
+}
+
+fn read_mcap(bytes: &[u8]) -> Result<usize, String> {
+    let choice = TopicChoice::default();
+    let mut rec = Recording::new("fuzz.mcap");
+    ros2::read_mcap(bytes, "fuzz.mcap", &mut rec, &choice).map_err(|e| e.to_string())?;
+    let topics = rec.choose(&choice).map_err(|e| e.to_string())?;
+    let log = gyropath::import::timeline::assemble(rec, &topics).map_err(|e| e.to_string())?;
+    Ok(log.len())
+}
+
+#[test]
+fn the_writers_make_bags_the_readers_read() {
+    // 1199 IMU rows inside the odometer's span; the fixes fall on samples.
+    assert_eq!(read_ros1(&ros1_bag()), Ok(1199));
+    assert_eq!(read_mcap(&mcap(false, true)), read_ros1(&ros1_bag()));
+    assert_eq!(read_mcap(&mcap(false, false)), read_ros1(&ros1_bag()));
+}
+
+#[test]
+fn an_mcap_with_no_imu_topic_names_the_file_and_what_it_has() {
+    let e = read_mcap(&mcap(true, true)).unwrap_err();
+    assert!(e.contains("fuzz.mcap") && e.contains("no IMU"), "{e}");
+    assert!(e.contains("/odom") && e.contains("/fix"), "{e}");
+}
+
+#[test]
+fn a_wrong_message_type_names_the_topic() {
+    let mut bag = BagWriter::new();
+    // Declared an IMU, carrying fixes.
+    bag.message(
+        "/imu",
+        "sensor_msgs/Imu",
+        1.0,
+        &Writer::ros1().fix(1.0, 42.0, -71.0, 1.0),
+    );
+    let e = read_ros1(&bag.bytes).unwrap_err();
+    assert!(
+        e.contains("fuzz.bag") && e.contains("'/imu'") && e.contains("cannot be decoded"),
+        "{e}"
+    );
+}
+
+#[test]
+fn not_a_bag_is_told_apart() {
+    let e = read_ros1(b"t_s,gx_dps\n").unwrap_err();
+    assert!(
+        e.contains("fuzz.bag") && e.contains("not a ROS 1 bag"),
+        "{e}"
+    );
+    let e = read_mcap(b"t_s,gx_dps\n").unwrap_err();
+    assert!(e.contains("fuzz.mcap") && e.contains("MCAP"), "{e}");
+}
+
+#[test]
+fn the_real_bag_cut_short_is_an_error_naming_the_file() {
+    let bytes = std::fs::read(HUSKY_BAG).unwrap();
+    for cut in [20, 5000, bytes.len() / 3, bytes.len() - 7] {
+        let e = read_ros1(&bytes[..cut]).unwrap_err();
+        assert!(
+            e.contains("fuzz.bag") && (e.contains("truncated") || e.contains("corrupt")),
+            "cut {cut}: {e}"
+        );
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    #[test]
+    fn truncated_bags_never_panic(cut in 0usize..1_000_000) {
+        let bag = ros1_bag();
+        let cut = cut % bag.len();
+        if let Err(e) = read_ros1(&bag[..cut]) {
+            prop_assert!(e.contains("fuzz.bag"), "{}", e);
+        }
+        let m = mcap(false, true);
+        let cut = cut % m.len();
+        if let Err(e) = read_mcap(&m[..cut]) {
+            prop_assert!(e.contains("fuzz.mcap"), "{}", e);
+        }
+    }
+
+    #[test]
+    fn corrupt_bags_never_panic(flips in proptest::collection::vec((0usize..2_000_000, any::<u8>()), 1..8)) {
+        let mut bag = ros1_bag();
+        let mut m = mcap(false, true);
+        for &(at, byte) in &flips {
+            let i = at % bag.len();
+            bag[i] ^= byte | 1;
+            let k = at % m.len();
+            m[k] ^= byte | 1;
+        }
+        if let Err(e) = read_ros1(&bag) {
+            prop_assert!(e.contains("fuzz.bag"), "{}", e);
+        }
+        if let Err(e) = read_mcap(&m) {
+            prop_assert!(e.contains("fuzz.mcap"), "{}", e);
+        }
+    }
+
+    #[test]
+    fn the_real_bags_bz2_chunks_corrupted_never_panic(at in 0usize..1_470_000, byte in 1u8..=255) {
+        let mut bytes = std::fs::read(HUSKY_BAG).unwrap();
+        let i = at % bytes.len();
+        bytes[i] ^= byte;
+        if let Err(e) = read_ros1(&bytes) {
+            prop_assert!(e.contains("fuzz.bag"), "{}", e);
+        }
+    }
+}
