@@ -160,7 +160,7 @@ impl Table {
                 message: format!("cannot read the header: {e}"),
             })?
             .clone();
-        let header_line = headers.position().map_or(1, |p| p.line());
+        let header_line = leading_comments(path) + 1;
         let mut index = Vec::new();
         let mut names = Vec::new();
         for w in wanted {
@@ -286,6 +286,19 @@ impl Table {
         }
         Ok(out)
     }
+}
+
+/// How many lines before the header are `#` comments (the csv reader skips them unnumbered).
+fn leading_comments(path: &Path) -> u64 {
+    use std::io::BufRead;
+    let Ok(f) = std::fs::File::open(path) else {
+        return 0;
+    };
+    std::io::BufReader::new(f)
+        .lines()
+        .map_while(Result::ok)
+        .take_while(|l| l.trim_start().starts_with('#'))
+        .count() as u64
 }
 
 fn unit_factor(what: &str, unit: &str, known: &[(&str, f64)]) -> Result<f64, String> {

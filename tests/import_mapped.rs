@@ -1,0 +1,221 @@
+//! Mapped CSVs (the README's two examples), rides written in the wrong axes
+//! or units (the checks name the mapping that undoes them), and per-fix GPS
+//! accuracy (a stretch of poor fixes is weighted down).
+
+mod common;
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use gyropath::import::{self, ImportOptions, Level, Mount, MountChoice, SourceKind};
+use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::signals::Signals;
+
+fn mapped(file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("data/mapped")
+        .join(file)
+}
+
+fn open_mapped(data: &str, gps: Option<&str>, map: &str) -> Result<import::Imported, String> {
+    import::open(
+        &mapped(data),
+        &ImportOptions {
+            map: Some(mapped(map)),
+            gps: gps.map(mapped),
+            ..ImportOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())
+}
+
+#[test]
+fn the_readme_examples_load_and_agree() {
+    let phone = open_mapped("phone-gyro.csv", Some("phone-location.csv"), "phone.toml").unwrap();
+    let logger = open_mapped("logger.csv", None, "logger.toml").unwrap();
+    for im in [&phone, &logger] {
+        assert_eq!(im.kind, SourceKind::MappedCsv);
+        assert_eq!(im.log.len(), 18_001);
+        assert_eq!(im.log.fix_count(), 181);
+        assert!(
+            im.check.worst() < Level::Problem,
+            "{:#?}",
+            im.check.verdicts
+        );
+        assert!(
+            im.check
+                .recommended
+                .as_ref()
+                .is_some_and(Mount::is_identity)
+        );
+    }
+    // Both are the same simulated ride: the phone's rad/s in its own axes,
+    // mapped, equal the logger's deg/s in the ride frame.
+    for j in (0..18_001).step_by(101) {
+        for k in 0..3 {
+            let (a, b) = (phone.log.gyro_dps[j][k], logger.log.gyro_dps[j][k]);
+            assert!((a - b).abs() < 1e-9, "row {j} axis {k}: {a} vs {b}");
+        }
+    }
+    assert_eq!(
+        phone.log.metadata.get("mount").map(String::as_str),
+        Some("x=-z,y=-x,z=y")
+    );
+    assert!(phone.log.gps_hacc_m.is_some() && phone.log.speed_mps.is_some());
+    assert!(logger.log.odo_m.is_some());
+    assert_eq!(logger.log.channels[0].0, "temp");
+    for im in [phone, logger] {
+        let sig = Arc::new(Signals::from_owned_log(im.log).unwrap());
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).unwrap();
+        fit.finish();
+        let rms = fit.stats().rms_horizontal_m;
+        assert!(rms < 2.0, "rms {rms}");
+    }
+}
+
+#[test]
+fn a_bad_map_or_column_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let map = dir.path().join("bad.toml");
+    let text = std::fs::read_to_string(mapped("logger.toml")).unwrap();
+    std::fs::write(&map, text.replace("\"gyro_z\"", "\"gyro_q\"")).unwrap();
+    let opts = ImportOptions {
+        map: Some(map.clone()),
+        ..ImportOptions::default()
+    };
+    let e = import::open(&mapped("logger.csv"), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("logger.csv:2: column 'gyro_q'"), "{e}");
+    assert!(e.contains("the header has: ms, gyro_x"), "{e}");
+    std::fs::write(&map, text.replace("unit = \"ms\"", "unit = \"fortnights\"")).unwrap();
+    let e = import::open(&mapped("logger.csv"), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("fortnights"), "{e}");
+    std::fs::write(&map, text.replace("[gps]", "[gpss]")).unwrap();
+    let e = import::open(&mapped("logger.csv"), &opts)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("bad.toml") && e.contains("not a column map"),
+        "{e}"
+    );
+    let csv = dir.path().join("l.csv");
+    let data = std::fs::read_to_string(mapped("logger.csv")).unwrap();
+    std::fs::write(&csv, data.replacen("\n100,", "\n100x,", 1)).unwrap();
+    let e = import::open(
+        &csv,
+        &ImportOptions {
+            map: Some(mapped("logger.toml")),
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("l.csv:13: column 'ms'"), "{e}");
+}
+
+/// Rewrite a simulated ride's gyro as a sensor mounted `mount` would log it, in rad/s if asked.
+fn mis_mounted(mount: &Mount, radians: bool) -> (import::RideLog, import::RideLog) {
+    let (sim, _) = common::ride(5, 600.0, &[]);
+    let log = import::parse(sim.log_csv.as_bytes(), "sim.csv").unwrap();
+    let mut bad = log.clone();
+    for g in &mut bad.gyro_dps {
+        let ride = *g;
+        let mut logged = [0.0; 3];
+        for i in 0..3 {
+            logged[mount.axis[i]] = mount.sign[i] * ride[i];
+        }
+        *g = if radians {
+            logged.map(f64::to_radians)
+        } else {
+            logged
+        };
+    }
+    (log, bad)
+}
+
+#[test]
+fn permuted_axes_and_radians_are_undone_by_the_mapping_the_check_names() {
+    for (mapping, radians) in [
+        ("x=-z,y=-x,z=y", true),
+        ("x=y,y=-x,z=z", false),
+        ("x=x,y=-y,z=-z", false),
+    ] {
+        let mount: Mount = mapping.parse().unwrap();
+        let (good, bad) = mis_mounted(&mount, radians);
+        let im = import::checked(bad, SourceKind::RideCsv, None, &MountChoice::Auto);
+        let rec = im.check.recommended.clone().unwrap();
+        // The vertical and the units are always told; without an accelerometer
+        // the forward axis is not, and a turn about the vertical is left to the start heading.
+        assert_eq!(
+            (rec.axis[2], rec.sign[2]),
+            (mount.axis[2], mount.sign[2]),
+            "{mapping}: {rec}"
+        );
+        if radians {
+            assert!((rec.scale - 57.29578).abs() < 1e-3, "{rec}");
+            assert!(
+                im.check
+                    .verdicts
+                    .iter()
+                    .any(|v| v.subject == "gyro units" && v.level == Level::Problem)
+            );
+        }
+        let yaw_fixed: Vec<f64> = im.log.gyro_dps.iter().map(|g| g[2]).collect();
+        for (j, g) in good.gyro_dps.iter().enumerate().step_by(503) {
+            assert!((yaw_fixed[j] - g[2]).abs() < 1e-9, "{mapping}: row {j}");
+        }
+        // As logged, the user is told, with the mapping (a turn about the
+        // vertical alone cannot be told without an accelerometer, and is harmless).
+        let (_, bad) = mis_mounted(&mount, radians);
+        let as_logged = import::checked(bad, SourceKind::RideCsv, None, &MountChoice::AsLogged);
+        let w = as_logged.warnings();
+        let told = w
+            .iter()
+            .any(|w| w.contains(&format!("the data say '{rec}'")));
+        assert_eq!(told, !rec.is_identity(), "{mapping}: {w:?}");
+    }
+}
+
+#[test]
+fn a_stretch_of_poor_fixes_is_weighted_down_by_its_accuracy() {
+    let (sim, _) = common::ride(6, 600.0, &[]);
+    let mut log = import::parse(sim.log_csv.as_bytes(), "poor.csv").unwrap();
+    // Two minutes of fixes 12 m off to the east-north-east, wandering by a few metres.
+    let m_per_deg = 111_320.0;
+    let mut hacc = vec![None; log.len()];
+    let mut k = 0usize;
+    for j in 0..log.len() {
+        let Some((lat, lon)) = log.fix[j] else {
+            continue;
+        };
+        k += 1;
+        let t = log.t_s[j];
+        let poor = (200.0..320.0).contains(&t);
+        hacc[j] = Some(if poor { 15.0 } else { 2.5 });
+        if poor {
+            let wander = 4.0 * ((k as f64) * 0.37).sin();
+            let (de, dn) = (12.0 + wander, 5.0 - wander);
+            log.fix[j] = Some((
+                lat + dn / m_per_deg,
+                lon + de / (m_per_deg * lat.to_radians().cos()),
+            ));
+        }
+    }
+    let fit_error = |log: &import::RideLog| {
+        let sig = Arc::new(Signals::from_log(log).unwrap());
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+        fit.finish();
+        sim.errors(&sig, &fit.trajectory().p).path_at_fixes_m
+    };
+    let unweighted = fit_error(&log);
+    log.gps_hacc_m = Some(hacc);
+    let weighted = fit_error(&log);
+    eprintln!("truth error at the fixes: unweighted {unweighted:.2} m, weighted {weighted:.2} m");
+    assert!(
+        weighted < 0.8 * unweighted,
+        "weighted {weighted:.2} m vs {unweighted:.2} m"
+    );
+}
