@@ -239,3 +239,48 @@ fn dropping_a_ride_on_the_window_loads_it_and_remembers_it() {
     assert_eq!(h.state().settings.recent.first(), Some(&ride));
     h.get_by_label_contains("hidden-gyro-scale.csv");
 }
+
+#[test]
+fn a_ros_bag_opens_with_its_topics_and_mounting_shown_and_the_mounting_can_be_changed() {
+    let bag = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/robot_localization-test1/test1.bag");
+    let app = GyropathApp::new(
+        manual_settings(),
+        gyropath::app::worker::RideSource::file(bag.clone()),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a.ride.is_some()),
+        "the bag loads: error {:?}",
+        h.state().error
+    );
+    h.get_by_label_contains("ROS 1 bag");
+    // The combo boxes show the chosen topics and the mounting applied.
+    h.get_by_value("/imu/data");
+    h.get_by_value("/husky_velocity_controller/odom");
+    h.get_by_value("/fix");
+    h.get_by_value("x=-z,y=-x,z=y");
+    h.get_by_label_contains("vertical axis: +y points up");
+    let origin = &h.state().ride.as_ref().expect("ride").origin;
+    assert_eq!(origin.recommended.as_deref(), Some("x=-z,y=-x,z=y"));
+    // Asking for the mounting as logged reloads the bag with it.
+    h.get_by_value("x=-z,y=-x,z=y").click();
+    h.run_steps(2);
+    h.get_by_label("as logged").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .ride
+            .as_ref()
+            .is_some_and(|r| r.origin.mount.is_none() && a.loading.is_none())),
+        "reloaded as logged"
+    );
+    let ride = h.state().ride.as_ref().expect("ride");
+    assert!(
+        ride.warnings
+            .iter()
+            .any(|w| w.contains("mounting: the data say")),
+        "{:?}",
+        ride.warnings
+    );
+}

@@ -7,6 +7,7 @@
 //! physics: it sends settings to the [`worker`] and draws its snapshots.
 
 pub mod plots;
+pub mod source;
 pub mod worker;
 
 use std::path::PathBuf;
@@ -59,6 +60,8 @@ impl Default for AppSettings {
 pub enum Command {
     Open(RideSource),
     PickRide,
+    /// Pick a rosbag2 folder (a ROS 2 bag is a folder, which a file dialog cannot pick).
+    PickBagFolder,
     Run,
     Pause,
     Step,
@@ -292,9 +295,20 @@ impl GyropathApp {
                 let tx = self.picked_tx.clone();
                 spawn_dialog(move || {
                     if let Some(p) = rfd::FileDialog::new()
-                        .add_filter("ride log", &["csv"])
+                        .add_filter("ride log or bag", &["csv", "bag", "mcap"])
+                        .add_filter("ride-log CSV", &["csv"])
+                        .add_filter("ROS 1 bag", &["bag"])
+                        .add_filter("ROS 2 bag (MCAP)", &["mcap"])
                         .pick_file()
                     {
+                        let _ = tx.send(Picked::Ride(p));
+                    }
+                });
+            }
+            Command::PickBagFolder => {
+                let tx = self.picked_tx.clone();
+                spawn_dialog(move || {
+                    if let Some(p) = rfd::FileDialog::new().pick_folder() {
                         let _ = tx.send(Picked::Ride(p));
                     }
                 });
@@ -399,8 +413,11 @@ impl GyropathApp {
     fn menu_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
         egui::MenuBar::new().ui(ui, |ui| {
             ui.menu_button("File", |ui| {
-                if ui.button("Open ride...").clicked() {
+                if ui.button("Open ride or bag...").clicked() {
                     commands.push(Command::PickRide);
+                }
+                if ui.button("Open ROS 2 bag folder...").clicked() {
+                    commands.push(Command::PickBagFolder);
                 }
                 if ui.button("Open the sample ride").clicked() {
                     commands.push(Command::Open(sample_ride()));
@@ -465,6 +482,10 @@ impl GyropathApp {
     }
 
     fn controls_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
+        if let Some(ride) = &self.ride {
+            source::source_ui(ui, ride, commands);
+            ui.separator();
+        }
         ui.heading("Fit");
         ui.horizontal(|ui| {
             let can = self.snapshot.is_some();

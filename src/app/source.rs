@@ -1,0 +1,121 @@
+//! The Source panel: what the ride was read from (kind, bag topics, the
+//! mounting applied) and what the checks said of its axes, units and datum.
+//! Choosing another topic or mounting reloads the ride with it; the panel
+//! itself holds no state and computes nothing.
+
+use crate::import::timeline::Role;
+use crate::import::{ImportOptions, Level, MountChoice, TopicChoice};
+
+use super::Command;
+use super::worker::{RideSource, RideView};
+
+/// Draw the Source panel for `ride`, pushing a reload when the user changes a choice.
+pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>) {
+    let origin = &ride.origin;
+    ui.heading("Source");
+    ui.label(format!(
+        "{} ({} rows, {:.0} s, {} fixes)",
+        origin.kind.map_or("ride-log CSV", |k| k.label()),
+        ride.rows,
+        ride.duration_s,
+        ride.fixes.len()
+    ));
+    let RideSource::Path(path, options) = &ride.source else {
+        checks_ui(ui, ride);
+        return;
+    };
+    if let Some(topics) = &origin.topics {
+        egui::Grid::new("topics").num_columns(2).show(ui, |ui| {
+            for (role, label, chosen) in [
+                (Role::Imu, "IMU", &topics.imu),
+                (Role::Odom, "odometer", &topics.odom),
+                (Role::Fix, "GPS", &topics.fix),
+            ] {
+                ui.label(label);
+                let mut picked = chosen.clone();
+                egui::ComboBox::from_id_salt(label)
+                    .selected_text(chosen.as_str())
+                    .show_ui(ui, |ui| {
+                        for t in topics.candidates(role) {
+                            ui.selectable_value(
+                                &mut picked,
+                                t.name.clone(),
+                                format!("{} ({}, {} msgs)", t.name, t.type_name, t.messages),
+                            );
+                        }
+                    });
+                if picked != *chosen {
+                    let mut choice = TopicChoice {
+                        imu: Some(topics.imu.clone()),
+                        odom: Some(topics.odom.clone()),
+                        fix: Some(topics.fix.clone()),
+                    };
+                    match role {
+                        Role::Imu => choice.imu = Some(picked),
+                        Role::Odom => choice.odom = Some(picked),
+                        Role::Fix => choice.fix = Some(picked),
+                    }
+                    commands.push(reload(path, options, |o| o.topics = choice));
+                }
+                ui.end_row();
+            }
+        });
+    }
+    ui.horizontal(|ui| {
+        ui.label("mounting");
+        let applied = origin.mount.clone().unwrap_or_else(|| "as logged".into());
+        let mut picked: Option<MountChoice> = None;
+        egui::ComboBox::from_id_salt("mount")
+            .selected_text(applied.as_str())
+            .show_ui(ui, |ui| {
+                if ui
+                    .selectable_label(origin.mount.is_none(), "as logged")
+                    .clicked()
+                {
+                    picked = Some(MountChoice::AsLogged);
+                }
+                if let Some(rec) = &origin.recommended {
+                    let label = format!("auto: {rec} (what the checks recommend)");
+                    let on = origin.mount.as_deref() == Some(rec.as_str());
+                    if ui.selectable_label(on, label).clicked() {
+                        picked = Some(MountChoice::Auto);
+                    }
+                }
+            });
+        if let Some(m) = picked.filter(|m| *m != options.mount) {
+            commands.push(reload(path, options, |o| o.mount = m));
+        }
+    });
+    checks_ui(ui, ride);
+}
+
+/// The checks' verdicts, the worst first, coloured by how much they matter.
+fn checks_ui(ui: &mut egui::Ui, ride: &RideView) {
+    let mut verdicts: Vec<_> = ride.origin.verdicts.iter().collect();
+    verdicts.sort_by_key(|v| std::cmp::Reverse(v.level));
+    let worst = verdicts.first().map_or(Level::Ok, |v| v.level);
+    let title = format!("Checks ({})", worst.label());
+    egui::CollapsingHeader::new(title)
+        .default_open(worst >= Level::Warning)
+        .show(ui, |ui| {
+            for v in verdicts {
+                let colour = match v.level {
+                    Level::Ok => egui::Color32::from_rgb(60, 160, 60),
+                    Level::Info => ui.visuals().text_color(),
+                    Level::Warning => egui::Color32::from_rgb(200, 150, 0),
+                    Level::Problem => egui::Color32::from_rgb(210, 60, 60),
+                };
+                ui.colored_label(colour, format!("{}: {}", v.subject, v.message));
+            }
+        });
+}
+
+fn reload(
+    path: &std::path::Path,
+    options: &ImportOptions,
+    change: impl FnOnce(&mut ImportOptions),
+) -> Command {
+    let mut o = options.clone();
+    change(&mut o);
+    Command::Open(RideSource::Path(path.to_path_buf(), o))
+}
