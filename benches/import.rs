@@ -1,0 +1,180 @@
+//! Import throughput on large bags (not a timed test: it prints figures).
+//!
+//! Writes a 1 GB ROS 2 bag (MCAP, zstd chunks, with the mcap writer) and a
+//! 1 GB ROS 1 bag of a 30-minute recording: a 10 Hz camera (45 KB frames,
+//! most of the bytes, as in real bags), a 200 Hz IMU, 50 Hz wheel odometry
+//! and 5 Hz GPS. Each is then imported (read, joined, checked, mounted) in a
+//! child process, which reports its time and peak memory (VmHWM), so the
+//! figure is the reader's alone and not the writer's.
+//!
+//! `cargo bench --bench import` (add `-- 256` for a recording of 256 MB of
+//! raw messages; the default, 1320, makes a 1 GB MCAP after compression)
+
+use std::io::{BufWriter, Write};
+use std::path::Path;
+use std::time::Instant;
+
+use gyropath::import::ros1::BagWriter;
+use gyropath::import::ros2::McapWriter;
+use gyropath::import::wire::Writer;
+use gyropath::import::{self, ImportOptions};
+
+/// Peak resident memory of this process (MB), from /proc.
+fn peak_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kb| kb / 1024.0)
+}
+
+/// One message of the recording: topic, ROS 1 type, time, payload (ROS 1 and CDR).
+type Emit<'a> = dyn FnMut(&str, &str, f64, &[u8], &[u8]) + 'a;
+
+/// The recording, in time order, sized to about `target` bytes.
+fn record(target: u64, emit: &mut Emit<'_>) {
+    let frame = 45_000usize;
+    // Camera bytes dominate: duration from the target size.
+    let duration = (target as f64 / (frame as f64 * 10.0)).max(10.0);
+    let mut noise = 0x9E37_79B9_7F4A_7C15u64;
+    let mut image = vec![0u8; frame];
+    let steps = (duration * 200.0) as usize;
+    for i in 0..steps {
+        let t = 1_700_000_000.0 + i as f64 / 200.0;
+        let s = i as f64 / 200.0;
+        let yaw = 0.2 * (0.05 * s).sin();
+        let imu1 = Writer::ros1().imu(t, [0.01, 0.02, yaw], [0.1, 0.0, 9.81]);
+        let imu2 = Writer::cdr().imu(t, [0.01, 0.02, yaw], [0.1, 0.0, 9.81]);
+        emit("/imu/data", "sensor_msgs/Imu", t, &imu1, &imu2);
+        if i % 4 == 0 {
+            let v = 8.0 + (0.01 * s).sin();
+            emit(
+                "/odom",
+                "nav_msgs/Odometry",
+                t,
+                &Writer::ros1().odometry(t, v),
+                &Writer::cdr().odometry(t, v),
+            );
+        }
+        if i % 40 == 0 {
+            let (lat, lon) = (47.5 + 2e-5 * (0.05 * s).sin(), 19.0 + 1e-4 * s / 60.0);
+            emit(
+                "/fix",
+                "sensor_msgs/NavSatFix",
+                t,
+                &Writer::ros1().fix(t, lat, lon, 4.0),
+                &Writer::cdr().fix(t, lat, lon, 4.0),
+            );
+        }
+        if i % 20 == 0 {
+            for b in image.iter_mut() {
+                noise ^= noise << 13;
+                noise ^= noise >> 7;
+                noise ^= noise << 17;
+                *b = (noise >> 56) as u8 & 0x3f;
+            }
+            emit("/camera/image_raw", "sensor_msgs/Image", t, &image, &image);
+        }
+    }
+}
+
+fn write_mcap(path: &Path, target: u64) {
+    let out = BufWriter::with_capacity(1 << 20, std::fs::File::create(path).expect("create"));
+    let mut w = McapWriter::new(out, true).expect("mcap writer");
+    record(target, &mut |topic, ty, t, _, cdr| {
+        let ty2 = ty.replacen('/', "/msg/", 1);
+        w.message(topic, &ty2, (t * 1e9) as u64, cdr)
+            .expect("write");
+    });
+    w.finish().expect("finish");
+}
+
+fn write_bag(path: &Path, target: u64) {
+    let mut out = BufWriter::with_capacity(1 << 20, std::fs::File::create(path).expect("create"));
+    let mut bag = BagWriter::new();
+    record(target, &mut |topic, ty, t, ros1, _| {
+        bag.message(topic, ty, t, ros1);
+        if bag.bytes.len() > 1 << 22 {
+            out.write_all(&bag.bytes).expect("write");
+            bag.bytes.clear();
+        }
+    });
+    out.write_all(&bag.bytes).expect("write");
+    out.flush().expect("flush");
+}
+
+/// In the child: import `path` and print seconds, rows and peak memory.
+fn read_child(path: &str) {
+    let started = Instant::now();
+    let im = import::open(Path::new(path), &ImportOptions::default()).expect("import");
+    let secs = started.elapsed().as_secs_f64();
+    println!(
+        "{secs} {} {} {}",
+        im.log.len(),
+        im.log.fix_count(),
+        peak_mb()
+    );
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--read") {
+        read_child(&args[i + 1]);
+        return;
+    }
+    let mb: u64 = args
+        .iter()
+        .skip(1)
+        .find_map(|a| a.parse().ok())
+        .unwrap_or(1320);
+    let dir = tempfile::tempdir().expect("tempdir");
+    let exe = std::env::current_exe().expect("exe");
+    println!("import of a {mb} MB recording (camera 10 Hz, IMU 200 Hz, odometry 50 Hz, GPS 5 Hz)");
+    println!(
+        "{:<22} {:>9} {:>8} {:>9} {:>9} {:>8} {:>10}",
+        "bag", "size MB", "time s", "MB/s", "rows", "fixes", "peak MB"
+    );
+    for (name, file, write) in [
+        (
+            "ROS 2 (MCAP, zstd)",
+            "big.mcap",
+            write_mcap as fn(&Path, u64),
+        ),
+        (
+            "ROS 1 (uncompressed)",
+            "big.bag",
+            write_bag as fn(&Path, u64),
+        ),
+    ] {
+        let path = dir.path().join(file);
+        write(&path, mb << 20);
+        let size = std::fs::metadata(&path).expect("size").len() as f64 / (1 << 20) as f64;
+        // Warm the page cache the way a second import would find it.
+        let _ = std::fs::read(&path).map(|b| b.len());
+        let out = std::process::Command::new(&exe)
+            .args(["--read", &path.display().to_string()])
+            .output()
+            .expect("child");
+        let text = String::from_utf8_lossy(&out.stdout);
+        let f: Vec<f64> = text
+            .split_whitespace()
+            .filter_map(|x| x.parse().ok())
+            .collect();
+        if f.len() < 4 {
+            eprintln!("child failed: {}", String::from_utf8_lossy(&out.stderr));
+            continue;
+        }
+        println!(
+            "{name:<22} {size:>9.0} {:>8.2} {:>9.0} {:>9.0} {:>8.0} {:>10.0}",
+            f[0],
+            size / f[0],
+            f[1],
+            f[2],
+            f[3]
+        );
+        let _ = std::fs::remove_file(&path);
+    }
+}
