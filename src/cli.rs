@@ -749,7 +749,7 @@ pub fn import(args: &ImportArgs) -> Result<()> {
 pub fn check(args: &CheckArgs) -> Result<()> {
     let mut options = args.options.options()?;
     // The checks read the data as logged; the mounting is what they recommend.
-    let asked = std::mem::replace(&mut options.mount, MountChoice::AsLogged);
+    options.mount = MountChoice::AsLogged;
     let imported = import::open(&args.source, &options)?;
     let report = &imported.check;
     println!("{} ({})", imported.log.source, imported.kind.label());
@@ -770,12 +770,13 @@ pub fn check(args: &CheckArgs) -> Result<()> {
         Some(m) if m.is_identity() => {
             println!("mounting  as logged: the axes are x forward, y left, z up, in deg/s")
         }
-        Some(m) => {
-            println!("mounting  recommended: --mount \"{m}\" (--mount auto applies it)");
-            if asked == MountChoice::AsLogged {
-                println!("          (the log is read as logged when --mount none is given)");
+        Some(m) => println!(
+            "mounting  recommended: --mount \"{m}\" ({})",
+            match imported.kind.default_mount() {
+                MountChoice::Auto => "bags get it by default",
+                _ => "--mount auto applies it",
             }
-        }
+        ),
         None => {
             println!("mounting  the data cannot tell; read as logged unless --mount says otherwise")
         }

@@ -261,3 +261,83 @@ fn batch_mode_fits_a_folder_and_reports_every_ride() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("--out-dir"));
 }
+
+const HUSKY: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/real/robot_localization-test1"
+);
+
+/// `gyropath fit SOURCE --report R` with no other flag: the report's odometer gain and RMS.
+fn fit_source(source: &str, report: &Path) -> (f64, f64) {
+    let out = gyropath(&["fit", source, "--quiet", "--report", s(report)]);
+    assert!(
+        out.status.success(),
+        "{source}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    let gain = r["parameters"]["odometer_gain"][0]["value"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("no gain in {r}"));
+    (gain, r["stats"]["rms_horizontal_m"].as_f64().unwrap())
+}
+
+#[test]
+fn bags_fit_with_no_other_flag_and_import_writes_a_ride_log_that_fits_the_same() {
+    let dir = tempfile::tempdir().unwrap();
+    let (g1, rms1) = fit_source(&format!("{HUSKY}/test1.bag"), &dir.path().join("a.json"));
+    let (g2, rms2) = fit_source(&format!("{HUSKY}/test1_ros2"), &dir.path().join("b.json"));
+    assert!((g1 - g2).abs() < 0.001, "gain {g1} vs {g2}");
+    assert!((0.95..=1.05).contains(&g1), "gain {g1}");
+    assert!(rms1 <= 2.5 && rms2 <= 2.5, "rms {rms1} {rms2}");
+    let csv = dir.path().join("husky.csv");
+    let out = gyropath(&["import", &format!("{HUSKY}/test1.bag"), "--out", s(&csv)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&csv).unwrap();
+    assert!(text.contains("# mount: x=-z,y=-x,z=y"), "{}", &text[..400]);
+    assert!(
+        text.contains("# topics: imu /imu/data, odom /husky_velocity_controller/odom, fix /fix")
+    );
+    assert!(text.contains("gps_hacc_m") && text.contains("ax_mps2") && text.contains("speed_mps"));
+    let (g3, rms3) = fit_source(s(&csv), &dir.path().join("c.json"));
+    assert!(
+        (g3 - g1).abs() < 1e-9 && (rms3 - rms1).abs() < 1e-9,
+        "{g3} {rms3} vs {g1} {rms1}"
+    );
+}
+
+#[test]
+fn check_names_the_mounting_and_a_wrong_topic_lists_the_candidates() {
+    let out = gyropath(&["check", &format!("{HUSKY}/test1.bag")]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("+y points up") && text.contains("-z points forward"),
+        "{text}"
+    );
+    assert!(text.contains("--mount \"x=-z,y=-x,z=y\""), "{text}");
+    let out = gyropath(&["fit", &format!("{HUSKY}/test1.bag"), "--imu", "/imu/nope"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("test1.bag") && err.contains("'/imu/nope'") && err.contains("/imu/data"),
+        "{err}"
+    );
+    let out = gyropath(&[
+        "fit",
+        &format!("{HUSKY}/test1.bag"),
+        "--mount",
+        "x=x,y=y,z=-z",
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("mirror"));
+}

@@ -109,7 +109,7 @@ impl Origin {
             topics: im.topics.clone(),
             mount: im.mount.as_ref().map(ToString::to_string),
             recommended: im.check.recommended.as_ref().map(ToString::to_string),
-            verdicts: im.check.verdicts.clone(),
+            verdicts: im.check.after_mounting(im.mount.as_ref()),
         }
     }
 }

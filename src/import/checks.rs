@@ -119,21 +119,40 @@ impl CheckReport {
             .unwrap_or(Level::Ok)
     }
 
+    /// The verdicts as they stand once `applied` is the mounting: an axis or
+    /// unit problem that the applied mounting undoes becomes a note saying so.
+    pub fn after_mounting(&self, applied: Option<&Mount>) -> Vec<Verdict> {
+        let undone = applied.is_some() && applied == self.recommended.as_ref();
+        self.verdicts
+            .iter()
+            .map(|v| {
+                let axes = matches!(
+                    v.subject.as_str(),
+                    "vertical axis" | "forward axis" | "gyro units"
+                );
+                if undone && axes && v.level == Level::Problem {
+                    Verdict {
+                        subject: v.subject.clone(),
+                        level: Level::Info,
+                        message: format!(
+                            "{} (as logged; the mounting {} applied undoes it)",
+                            v.message,
+                            applied.map(ToString::to_string).unwrap_or_default()
+                        ),
+                    }
+                } else {
+                    v.clone()
+                }
+            })
+            .collect()
+    }
+
     /// Lines to warn a user with, given the mounting that was applied on load.
     pub fn warnings(&self, applied: Option<&Mount>) -> Vec<String> {
         let mut out: Vec<String> = self
-            .verdicts
-            .iter()
+            .after_mounting(applied)
+            .into_iter()
             .filter(|v| v.level >= Level::Warning)
-            .filter(|v| {
-                // An axis or unit problem that the applied mounting undoes is no longer one.
-                !(applied.is_some()
-                    && applied == self.recommended.as_ref()
-                    && matches!(
-                        v.subject.as_str(),
-                        "vertical axis" | "forward axis" | "gyro units"
-                    ))
-            })
             .map(|v| format!("{}: {}", v.subject, v.message))
             .collect();
         if let Some(rec) = &self.recommended {
@@ -495,9 +514,9 @@ fn course_vertical(fixes: &[AtFix], report: &mut CheckReport) -> Option<(AxisFin
     if dc.len() < 8 || total < 90.0 {
         report.say(
             "vertical axis (GPS course)",
-            Level::Warning,
+            Level::Info,
             format!(
-                "cannot tell: the track turns too little ({total:.0} deg over {} stretches of {STRETCH_M} m)",
+                "not checked: the track turns too little ({total:.0} deg over {} stretches of {STRETCH_M} m)",
                 dc.len()
             ),
         );
@@ -635,8 +654,8 @@ fn forward_axis(fixes: &[AtFix], up: AxisFinding, report: &mut CheckReport) -> O
     if dvdt.len() < 20 {
         report.say(
             "forward axis",
-            Level::Warning,
-            "cannot tell: too few GPS intervals with accelerometer data".into(),
+            Level::Info,
+            "not checked: too few GPS intervals with accelerometer data".into(),
         );
         return None;
     }
@@ -715,8 +734,8 @@ fn odometer_scale(fixes: &[AtFix], report: &mut CheckReport) {
     if gps < 50.0 {
         report.say(
             "odometer",
-            Level::Warning,
-            format!("cannot check its scale: the GPS track is only {gps:.0} m long"),
+            Level::Info,
+            format!("scale not checked: the GPS track is only {gps:.0} m long"),
         );
         return;
     }

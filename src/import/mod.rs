@@ -327,6 +327,12 @@ pub fn checked(
         MountChoice::Default => kind.default_mount(),
         other => other.clone(),
     };
+    if choice == MountChoice::Auto && check.recommended.is_none() {
+        log.warnings.push(format!(
+            "{}: mounting: the data cannot tell which axis is up (see the checks); the axes are read as logged (x forward, y left, z up assumed); give --mount if they are not",
+            log.source
+        ));
+    }
     let mount = match choice {
         MountChoice::Default | MountChoice::AsLogged => None,
         MountChoice::Auto => check.recommended.clone().filter(|m| !m.is_identity()),
