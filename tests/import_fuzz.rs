@@ -15,8 +15,11 @@ const HUSKY_BAG: &str = concat!(
     "/../shared/real/robot_localization-test1/test1.bag"
 );
 
+/// A message: topic, ROS 1 type, time, ROS 1 payload, CDR payload.
+type Message = (&'static str, &'static str, f64, Vec<u8>, Vec<u8>);
+
 /// A minute of a small robot: IMU 20 Hz, odometry 10 Hz, fixes 1 Hz.
-fn messages() -> Vec<(&'static str, &'static str, f64, Vec<u8>, Vec<u8>)> {
+fn messages() -> Vec<Message> {
     let mut out = Vec::new();
     for i in 0..1200 {
         let t = 1000.0 + i as f64 * 0.05;

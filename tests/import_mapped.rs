@@ -187,18 +187,15 @@ fn a_stretch_of_poor_fixes_is_weighted_down_by_its_accuracy() {
     let m_per_deg = 111_320.0;
     let mut hacc = vec![None; log.len()];
     let mut k = 0usize;
-    for j in 0..log.len() {
-        let Some((lat, lon)) = log.fix[j] else {
-            continue;
-        };
+    for ((fix, &t), acc) in log.fix.iter_mut().zip(&log.t_s).zip(hacc.iter_mut()) {
+        let Some((lat, lon)) = *fix else { continue };
         k += 1;
-        let t = log.t_s[j];
         let poor = (200.0..320.0).contains(&t);
-        hacc[j] = Some(if poor { 15.0 } else { 2.5 });
+        *acc = Some(if poor { 15.0 } else { 2.5 });
         if poor {
             let wander = 4.0 * ((k as f64) * 0.37).sin();
             let (de, dn) = (12.0 + wander, 5.0 - wander);
-            log.fix[j] = Some((
+            *fix = Some((
                 lat + dn / m_per_deg,
                 lon + de / (m_per_deg * lat.to_radians().cos()),
             ));

@@ -478,8 +478,10 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
             "{file}: '{fix_name}': {no_fix} of {fix_count} messages carry no fix (status -1, NaN or 0,0) and are left out"
         ));
     }
+    // Fixes within the rows' span: rows start at the first IMU sample kept.
     let outside = fixes.len();
-    fixes.retain(|f| (start..=end).contains(&f.t_ns));
+    let span = imu[0].t_ns..=imu[imu.len() - 1].t_ns;
+    fixes.retain(|f| span.contains(&f.t_ns));
     let outside = outside - fixes.len();
     if outside > 0 {
         warnings.push(format!(
