@@ -261,7 +261,17 @@ fn a_ros_bag_opens_with_its_topics_and_mounting_shown_and_the_mounting_can_be_ch
     h.get_by_value("/husky_velocity_controller/odom");
     h.get_by_value("/fix");
     h.get_by_value("x=-z,y=-x,z=y");
+    // Nothing is wrong once mounted, so the checks are folded; opened, they
+    // say what the data showed and that the mounting undoes it.
+    h.get_by_label("Checks (info)").click();
+    h.run_steps(2);
     h.get_by_label_contains("vertical axis: +y points up");
+    // The vertical and the forward axis both.
+    assert_eq!(
+        h.get_all_by_label_contains("the mounting x=-z,y=-x,z=y applied undoes it")
+            .count(),
+        2
+    );
     let origin = &h.state().ride.as_ref().expect("ride").origin;
     assert_eq!(origin.recommended.as_deref(), Some("x=-z,y=-x,z=y"));
     // Asking for the mounting as logged reloads the bag with it.
