@@ -271,15 +271,7 @@ pub fn odometer_distance(log: &RideLog) -> Result<(Vec<f64>, Odometer), SignalEr
 /// `d_j = (v_{j-1} + v_j) / 2 * dt_j` (a speed is an instantaneous sample);
 /// empty fields are interpolated. Negative speed is reversing: the path moves backwards.
 fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>, SignalError> {
-    if speed.iter().all(Option::is_none) {
-        return Err(SignalError::Field {
-            file: log.source.clone(),
-            line: log.line[0],
-            column: "speed_mps".into(),
-            message: "the column is empty on every row".into(),
-        });
-    }
-    let v = fill_gaps(speed);
+    let v = filled_column(speed, log, "speed_mps")?;
     let mut d = vec![0.0; v.len()];
     for j in 1..v.len() {
         d[j] = 0.5 * (v[j - 1] + v[j]) * (log.t_s[j] - log.t_s[j - 1]);
@@ -291,20 +283,29 @@ fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>,
 /// Signed: an odometer that counts down is reversing (the path moves
 /// backwards), and the sub-millimetre jitter of one at a standstill is noise.
 fn distance_from_odometer(odo: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>, SignalError> {
-    if odo.iter().all(Option::is_none) {
-        return Err(SignalError::Field {
-            file: log.source.clone(),
-            line: log.line[0],
-            column: "odo_m".into(),
-            message: "the column is empty on every row".into(),
-        });
-    }
-    let filled = fill_gaps(odo);
+    let filled = filled_column(odo, log, "odo_m")?;
     let mut d = vec![0.0; filled.len()];
     for j in 1..filled.len() {
         d[j] = filled[j] - filled[j - 1];
     }
     Ok(d)
+}
+
+/// A column with its empty fields interpolated; one empty on every row is an error naming it.
+fn filled_column(
+    values: &[Option<f64>],
+    log: &RideLog,
+    column: &str,
+) -> Result<Vec<f64>, SignalError> {
+    if values.iter().all(Option::is_none) {
+        return Err(SignalError::Field {
+            file: log.source.clone(),
+            line: log.line[0],
+            column: column.into(),
+            message: "the column is empty on every row".into(),
+        });
+    }
+    Ok(fill_gaps(values))
 }
 
 /// Linear interpolation over empty fields; ends are held at the nearest value.

@@ -248,28 +248,12 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
         return Ok(SourceKind::Ros2Mcap);
     }
     let mut head = [0u8; 13];
-    let n = {
-        use std::io::Read;
-        let mut f = std::fs::File::open(path).map_err(|source| LoadError::Io {
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| ros1::read_full(&mut f, &mut head))
+        .map_err(|source| LoadError::Io {
             file: path.display().to_string(),
             source,
         })?;
-        let mut n = 0;
-        while n < head.len() {
-            match f.read(&mut head[n..]) {
-                Ok(0) => break,
-                Ok(k) => n += k,
-                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(source) => {
-                    return Err(LoadError::Io {
-                        file: path.display().to_string(),
-                        source,
-                    });
-                }
-            }
-        }
-        n
-    };
     let head = &head[..n];
     let ext = path
         .extension()

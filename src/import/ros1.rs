@@ -226,7 +226,7 @@ impl Bag<'_> {
 }
 
 /// `read_exact` that tells a clean end (0 bytes) from a short read.
-fn read_full(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
+pub(super) fn read_full(input: &mut impl Read, buf: &mut [u8]) -> std::io::Result<usize> {
     let mut n = 0;
     while n < buf.len() {
         match input.read(&mut buf[n..]) {

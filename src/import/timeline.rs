@@ -248,35 +248,25 @@ impl Recording {
                 message,
             };
             if let Some(asked) = role.asked(choice) {
+                let topic_err = |what: String| LoadError::Topic {
+                    file: self.source.clone(),
+                    topic: asked.to_string(),
+                    message: format!(
+                        "{what}; candidates: {}",
+                        if candidates.is_empty() {
+                            "none".into()
+                        } else {
+                            list(&candidates)
+                        }
+                    ),
+                };
                 return match self.topics.iter().find(|t| t.name == asked) {
                     Some(t) if t.kind.is_some_and(|k| role.accepts(k)) => Ok(asked.to_string()),
-                    Some(t) => Err(LoadError::Topic {
-                        file: self.source.clone(),
-                        topic: asked.to_string(),
-                        message: format!(
-                            "is {}, not an {}; candidates: {}",
-                            t.type_name,
-                            role.what(),
-                            if candidates.is_empty() {
-                                "none".into()
-                            } else {
-                                list(&candidates)
-                            }
-                        ),
-                    }),
-                    None => Err(LoadError::Topic {
-                        file: self.source.clone(),
-                        topic: asked.to_string(),
-                        message: format!(
-                            "no such topic; {} candidates: {}",
-                            role.what(),
-                            if candidates.is_empty() {
-                                "none".into()
-                            } else {
-                                list(&candidates)
-                            }
-                        ),
-                    }),
+                    Some(t) => Err(topic_err(format!(
+                        "is {}, not the role asked for",
+                        t.type_name
+                    ))),
+                    None => Err(topic_err("no such topic".into())),
                 };
             }
             match candidates.as_slice() {

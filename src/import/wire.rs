@@ -259,18 +259,17 @@ pub fn odometry(w: &mut impl Wire) -> Result<SpeedMsg> {
     w.skip_string()?;
     w.f64s::<7>()?;
     w.f64s::<36>()?;
-    let linear = w.f64s::<3>()?;
-    let angular = w.f64s::<3>()?;
-    Ok(SpeedMsg {
-        t_ns,
-        speed: linear[0],
-        yaw_rate: angular[2],
-    })
+    twist(w, t_ns)
 }
 
 /// `header, twist (linear 3, angular 3)`.
 pub fn twist_stamped(w: &mut impl Wire) -> Result<SpeedMsg> {
     let t_ns = w.header_stamp()?;
+    twist(w, t_ns)
+}
+
+/// `geometry_msgs/Twist`: `linear (3), angular (3)`.
+fn twist(w: &mut impl Wire, t_ns: i64) -> Result<SpeedMsg> {
     let linear = w.f64s::<3>()?;
     let angular = w.f64s::<3>()?;
     Ok(SpeedMsg {
