@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use gyropath::diagnosis::{Diagnosis, Folds};
+use gyropath::diagnosis::{Diagnosis, Folds, limits};
 use gyropath::export::{FitReport, write_atomically, write_path_csv};
 use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
@@ -73,6 +73,10 @@ pub struct SourceArgs {
     /// Second CSV with the GPS fixes of a mapped CSV, joined by time.
     #[arg(long)]
     pub gps: Option<PathBuf>,
+    /// Attitude model: `auto` (planar for yaw-rate sensors and vehicles that stay
+    /// level, else 3D), `3d`, or `planar` (heading only).
+    #[arg(long, default_value = "auto")]
+    pub attitude: String,
 }
 
 impl SourceArgs {
@@ -95,6 +99,7 @@ impl SourceArgs {
             mount,
             map: self.map.clone(),
             gps: self.gps.clone(),
+            attitude: (self.attitude != "auto").then(|| self.attitude.clone()),
         })
     }
 }
@@ -379,6 +384,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    physical(&fit)?;
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
     if let Some(out) = &args.out {
         write_atomically(out, Some(ride), |w| {
@@ -395,6 +401,22 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         print_summary(&report);
     }
     Ok(())
+}
+
+/// A fit beyond the physical limits is a failure, with its likely cause,
+/// never a result (see `gyropath::diagnosis::limits`).
+fn physical(fit: &Reconstruction) -> Result<()> {
+    let broken = limits::check(fit.model(), fit.params());
+    if broken.is_empty() {
+        return Ok(());
+    }
+    let lines: Vec<String> = broken.iter().map(|v| format!("  {v}")).collect();
+    anyhow::bail!(
+        "{}: the fit failed: it is not physical, although its path is {:.2} m from the fixes:\n{}",
+        fit.model().signals.source,
+        fit.stats().rms_horizontal_m,
+        lines.join("\n")
+    )
 }
 
 /// One line of the batch summary.
@@ -443,6 +465,7 @@ fn fit_one(
     let signals = Arc::new(load_signals(ride, source, true)?);
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
+    physical(&fit)?;
     let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
     let stem = ride
         .file_stem()
@@ -541,6 +564,7 @@ fn print_summary(r: &FitReport) {
         r.source, r.rows, r.duration_s, r.gps_fixes
     );
     println!("model     {}", r.model.join(", "));
+    println!("attitude  {}", r.attitude);
     println!(
         "iters     step 1: {}, step 2: {}",
         r.iterations_step1, r.iterations_step2
@@ -561,7 +585,13 @@ fn print_summary(r: &FitReport) {
         }
         let list: Vec<String> = values
             .iter()
-            .map(|p| format!("{} {:.5} {}", p.name, p.value, p.unit))
+            .map(|p| {
+                if p.fixed {
+                    format!("{} not fitted", p.name)
+                } else {
+                    format!("{} {:.5} {}", p.name, p.value, p.unit)
+                }
+            })
             .collect();
         println!("{effect}: {}", list.join(", "));
     }

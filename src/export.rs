@@ -144,6 +144,8 @@ pub struct ParamValue {
     pub name: String,
     pub value: f64,
     pub unit: String,
+    /// Held at its starting value, not fitted (roll and pitch of a planar model).
+    pub fixed: bool,
 }
 
 /// The fit report written by `gyropath fit --report`.
@@ -158,6 +160,8 @@ pub struct FitReport {
     pub iterations_step1: usize,
     pub iterations_step2: usize,
     pub stats: FitStats,
+    /// The attitude model (3D or planar) and why it was chosen.
+    pub attitude: String,
     /// Parameters per effect id.
     pub parameters: BTreeMap<String, Vec<ParamValue>>,
     pub warnings: Vec<String>,
@@ -169,11 +173,15 @@ impl FitReport {
         let model = fit.model();
         let sig = &model.signals;
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
-        for ((effect, info), value) in model.param_infos().into_iter().zip(fit.params()) {
+        let fixed = model.fixed_mask();
+        for (((effect, info), value), fixed) in
+            model.param_infos().into_iter().zip(fit.params()).zip(fixed)
+        {
             parameters.entry(effect).or_default().push(ParamValue {
                 name: info.name,
                 value: value * info.scale,
                 unit: info.unit.to_string(),
+                fixed,
             });
         }
         let [s1, s2] = fit.phase_iterations();
@@ -187,6 +195,7 @@ impl FitReport {
             iterations_step1: s1,
             iterations_step2: s2,
             stats: fit.stats(),
+            attitude: sig.attitude.describe(),
             parameters,
             warnings: sig.warnings.clone(),
             elapsed_s,

@@ -64,7 +64,116 @@ pub struct Signals {
     pub channels: Vec<(String, Vec<f64>)>,
     /// How distance was measured, for reports.
     pub odometer: Odometer,
+    /// Whether the attitude is modelled in 3D or about the vertical only, and why.
+    pub attitude: Attitude,
     pub warnings: Vec<String>,
+}
+
+/// How the attitude is modelled: the choice and the reason for it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub enum Attitude {
+    /// Full 3D attitude from all three rates.
+    Full { reason: String },
+    /// Heading only: the roll and pitch rates are set to zero and the start
+    /// tilt is not fitted, so the sensor stays upright.
+    Planar { reason: String },
+}
+
+impl Attitude {
+    pub fn is_planar(&self) -> bool {
+        matches!(self, Self::Planar { .. })
+    }
+
+    /// One line for reports: the model and why.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Full { reason } => format!("3D ({reason})"),
+            Self::Planar { reason } => format!("planar, heading only ({reason})"),
+        }
+    }
+}
+
+/// A vehicle whose roll and pitch change by less than this over
+/// [`LEVEL_WINDOW_S`] in 95 % of the windows is taken as level (degrees).
+///
+/// Measured: a skid-steer robot shaking on rough ground 1.6-1.7 deg (its
+/// roll and pitch rates are 1.4-2.1 deg/s of noise), a car on a motorway 0.9
+/// and 4.9 (hill crests), simulated bicycles leaning into turns 10-19.
+/// Below this, modelling roll and pitch buys at most cos(3 deg) = 0.9986 in
+/// distance and costs a degeneracy: a free tilt of the yaw axis can stand in
+/// for a yaw scale error (cos 24 deg = 0.913 turned a robot's sensor 40 deg).
+pub const LEVEL_LIMIT_DEG: f64 = 3.0;
+/// Window over which roll and pitch changes are measured (s).
+pub const LEVEL_WINDOW_S: f64 = 10.0;
+
+/// The 95th percentile, over windows of [`LEVEL_WINDOW_S`], of how far the
+/// roll and the pitch angle move (deg): the rates less their median (the
+/// bias: a vehicle does not keep rolling), integrated.
+pub fn level_motion(t: &[f64], rates: &[Vector3<f64>]) -> [f64; 2] {
+    let mut out = [0.0; 2];
+    if t.len() < 3 {
+        return out;
+    }
+    for (a, o) in out.iter_mut().enumerate() {
+        let mut r: Vec<f64> = rates.iter().map(|w| w[a]).collect();
+        let mid = r.len() / 2;
+        let median = *r.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let mut angle = vec![0.0; t.len()];
+        for j in 1..t.len() {
+            angle[j] = angle[j - 1] + (rates[j][a] - median) * (t[j] - t[j - 1]);
+        }
+        let mut k = 0usize;
+        r.clear();
+        for j in 0..t.len() {
+            while t[j] - t[k] > LEVEL_WINDOW_S {
+                k += 1;
+            }
+            r.push((angle[j] - angle[k]).abs());
+        }
+        let q = (r.len() * 95 / 100).min(r.len() - 1);
+        *o = r.select_nth_unstable_by(q, f64::total_cmp).1.to_degrees();
+    }
+    out
+}
+
+/// Choose the attitude model of a log: `# attitude: planar|3d` in its
+/// metadata decides; else planar when there are no roll and pitch rates
+/// (a yaw-rate sensor) or the vehicle stays level (see [`LEVEL_LIMIT_DEG`]).
+fn choose_attitude(log: &RideLog, t: &[f64], rates: &[Vector3<f64>]) -> Result<Attitude, String> {
+    match log.metadata.get("attitude").map(|v| v.trim()) {
+        Some("planar") => {
+            return Ok(Attitude::Planar {
+                reason: "asked for".into(),
+            });
+        }
+        Some("3d") => {
+            return Ok(Attitude::Full {
+                reason: "asked for".into(),
+            });
+        }
+        None | Some("auto") => {}
+        Some(other) => {
+            return Err(format!(
+                "metadata attitude: '{other}' is none of auto, 3d, planar"
+            ));
+        }
+    }
+    if rates.iter().all(|w| w.x == 0.0 && w.y == 0.0) {
+        return Ok(Attitude::Planar {
+            reason: "the log has no roll and pitch rates: a yaw-rate sensor".into(),
+        });
+    }
+    let [roll, pitch] = level_motion(t, rates);
+    let stays = format!(
+        "roll and pitch move {roll:.1} and {pitch:.1} deg over {LEVEL_WINDOW_S:.0} s (95 %)"
+    );
+    Ok(if roll.max(pitch) < LEVEL_LIMIT_DEG {
+        Attitude::Planar {
+            reason: format!("the vehicle stays level: {stays}"),
+        }
+    } else {
+        Attitude::Full { reason: stays }
+    })
 }
 
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -143,7 +252,14 @@ impl Signals {
                 )));
             }
         };
-        let (gyro, gaps) = step_rates(raw, &dt, instantaneous);
+        let (mut gyro, gaps) = step_rates(raw, &dt, instantaneous);
+        let attitude = choose_attitude(log, &t, &gyro).map_err(&unusable)?;
+        if attitude.is_planar() {
+            for w in &mut gyro {
+                w.x = 0.0;
+                w.y = 0.0;
+            }
+        }
         let mut warnings = log.warnings.clone();
         if let Some(g) = gaps.longest {
             warnings.push(format!(
@@ -223,6 +339,7 @@ impl Signals {
             has_gps_alt,
             channels,
             odometer,
+            attitude,
             warnings,
         })
     }
@@ -565,5 +682,94 @@ mod owned_tests {
         assert_eq!(a.distance, b.distance);
         assert_eq!(a.fixes, b.fixes);
         assert_eq!(a.warnings, b.warnings);
+    }
+}
+
+#[cfg(test)]
+mod attitude_tests {
+    use super::*;
+
+    #[test]
+    fn yaw_rate_sensors_and_level_vehicles_are_planar_and_leaning_bicycles_3d() {
+        let mut log = crate::testing::winding_log(300.0, 50.0);
+        for g in &mut log.gyro_dps {
+            g[0] = 0.0;
+            g[1] = 0.0;
+        }
+        let sig = Signals::from_log(&log).unwrap();
+        assert!(
+            sig.attitude.describe().contains("yaw-rate sensor"),
+            "{:?}",
+            sig.attitude
+        );
+        let sim = crate::simulation::simulate(&crate::simulation::SimConfig {
+            seed: 2,
+            duration_s: 300.0,
+            ..Default::default()
+        })
+        .unwrap();
+        let bike =
+            Signals::from_log(&crate::import::parse(sim.log_csv.as_bytes(), "b").unwrap()).unwrap();
+        assert!(!bike.attitude.is_planar(), "{:?}", bike.attitude);
+        assert!(bike.gyro.iter().any(|w| w.x != 0.0));
+        // Asked for, either way.
+        let mut asked = crate::import::parse(sim.log_csv.as_bytes(), "b").unwrap();
+        asked.metadata.insert("attitude".into(), "planar".into());
+        let planar = Signals::from_log(&asked).unwrap();
+        assert!(planar.attitude.is_planar());
+        assert!(planar.gyro.iter().all(|w| w.x == 0.0 && w.y == 0.0));
+        asked.metadata.insert("attitude".into(), "sideways".into());
+        assert!(
+            Signals::from_log(&asked)
+                .unwrap_err()
+                .to_string()
+                .contains("sideways")
+        );
+    }
+
+    #[test]
+    fn level_motion_measures_roll_and_pitch_over_ten_seconds() {
+        // 100 Hz; roll swings +-20 deg every 4 s (a bicycle), pitch a constant bias.
+        let t: Vec<f64> = (0..6000).map(|i| i as f64 * 0.01).collect();
+        let rates: Vec<Vector3<f64>> = t
+            .iter()
+            .map(|&s| {
+                let roll_rate = 20f64.to_radians()
+                    * std::f64::consts::FRAC_PI_2
+                    * (s * std::f64::consts::FRAC_PI_2).cos();
+                Vector3::new(roll_rate, 0.01, 0.2)
+            })
+            .collect();
+        let [roll, pitch] = level_motion(&t, &rates);
+        assert!(roll > 15.0 && roll < 45.0, "{roll}");
+        assert!(pitch < 1e-6, "a constant bias is no motion: {pitch}");
+    }
+
+    #[test]
+    fn a_decreasing_odometer_and_a_negative_speed_are_reversing() {
+        let mut log = crate::testing::winding_log(30.0, 10.0);
+        let n = log.len();
+        let odo: Vec<Option<f64>> = (0..n)
+            .map(|j| {
+                Some(if j < n / 2 {
+                    j as f64
+                } else {
+                    (n - j) as f64 - 0.0001 * (j % 2) as f64
+                })
+            })
+            .collect();
+        log.odo_m = Some(odo);
+        let (d, _) = odometer_distance(&log).unwrap();
+        assert!(d[1] > 0.0 && d[n - 2] < 0.0);
+        assert!((d.iter().sum::<f64>() - (1.0 - 0.0001 * ((n - 1) % 2) as f64)).abs() < 1e-9);
+        log.odo_m = None;
+        log.speed_mps = Some(
+            (0..n)
+                .map(|j| Some(if j < n / 2 { 2.0 } else { -1.0 }))
+                .collect(),
+        );
+        let (d, kind) = odometer_distance(&log).unwrap();
+        assert_eq!(kind, Odometer::Speed);
+        assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
     }
 }

@@ -341,3 +341,77 @@ fn check_names_the_mounting_and_a_wrong_topic_lists_the_candidates() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("mirror"));
 }
+
+#[test]
+fn a_fit_with_wrong_axes_fails_with_its_cause_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("path.csv");
+    let out = gyropath(&[
+        "fit",
+        &format!("{HUSKY}/test1.bag"),
+        "--mount",
+        "none",
+        "--out",
+        s(&path),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the fit failed: it is not physical"), "{err}");
+    assert!(err.contains("start tilt of the sensor"), "{err}");
+    assert!(err.contains("--mount auto"), "{err}");
+    // The checks had said so, with the mounting that undoes it.
+    assert!(err.contains("the data say 'x=-z,y=-x,z=y'"), "{err}");
+    assert!(!path.exists(), "a failed fit wrote a path");
+}
+
+#[test]
+fn the_husky_is_planar_physical_and_diagnose_finds_nothing_absurd() {
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    let (gain, rms) = fit_source(&format!("{HUSKY}/test1.bag"), &report);
+    assert!(
+        (0.95..=1.05).contains(&gain) && rms <= 2.5,
+        "gain {gain}, rms {rms}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert!(
+        r["attitude"].as_str().unwrap().starts_with("planar"),
+        "{}",
+        r["attitude"]
+    );
+    let tilt = &r["parameters"]["initial_orientation"];
+    assert_eq!(tilt[0]["fixed"], true);
+    assert_eq!(tilt[0]["value"], 0.0);
+    let diag = dir.path().join("d.json");
+    let out = gyropath(&[
+        "diagnose",
+        &format!("{HUSKY}/test1.bag"),
+        "--quiet",
+        "--json",
+        s(&diag),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&diag).unwrap()).unwrap();
+    for c in d["ranking"].as_array().unwrap() {
+        if c["significant"] == true {
+            for (name, e) in c["estimate"].as_object().unwrap() {
+                let v = e["value"].as_f64().unwrap().abs();
+                use gyropath::diagnosis::limits::{MAX_MOUNT_DEG, MAX_SCALE_PERCENT};
+                let limit = if name.starts_with("forward") {
+                    MAX_MOUNT_DEG
+                } else if name.starts_with("scale") {
+                    MAX_SCALE_PERCENT
+                } else {
+                    f64::INFINITY
+                };
+                assert!(v <= limit, "{}: {name} {v} marked significant", c["effect"]);
+            }
+        }
+    }
+}

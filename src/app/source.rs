@@ -21,6 +21,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         ride.fixes.len()
     ));
     let RideSource::Path(path, options) = &ride.source else {
+        ui.label(format!("attitude: {}", ride.attitude));
         checks_ui(ui, ride);
         return;
     };
@@ -86,6 +87,26 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
             commands.push(reload(path, options, |o| o.mount = m));
         }
     });
+    ui.horizontal(|ui| {
+        ui.label("attitude");
+        let current = options.attitude.clone().unwrap_or_else(|| "auto".into());
+        let mut picked = current.clone();
+        egui::ComboBox::from_id_salt("attitude")
+            .selected_text(if ride.planar { "planar" } else { "3D" })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut picked, "auto".to_string(), "auto (from the data)");
+                ui.selectable_value(&mut picked, "3d".to_string(), "3D");
+                ui.selectable_value(&mut picked, "planar".to_string(), "planar (heading only)");
+            });
+        if picked != current {
+            commands.push(reload(path, options, |o| {
+                o.attitude = (picked != "auto").then_some(picked);
+            }));
+        }
+    })
+    .response
+    .on_hover_text(&ride.attitude);
+    ui.small(&ride.attitude);
     checks_ui(ui, ride);
 }
 

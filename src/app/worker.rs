@@ -89,6 +89,9 @@ pub struct RideView {
     pub warnings: Vec<String>,
     /// What the ride was read from, and what the checks said.
     pub origin: Origin,
+    /// The attitude model and why (see [`crate::signals::Attitude`]).
+    pub attitude: String,
+    pub planar: bool,
 }
 
 /// Where a ride came from: its kind, the topics read (bags), the mounting
@@ -502,6 +505,8 @@ fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
         channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
         warnings: sig.warnings.clone(),
         origin: Origin::default(),
+        attitude: sig.attitude.describe(),
+        planar: sig.attitude.is_planar(),
     }
 }
 

@@ -235,10 +235,13 @@ fn candidate(
     let (base_sse, sse) = (base.block_sse(use_fix), ho.block_sse(use_fix));
     let t = paired_t(&base_sse, &sse);
     let drop = 1.0 - heldout / base_rms;
-    let significant = significant(drop, t);
     let e = fit.model().effect_index(id).map(|e| fit.model().range(e));
     let estimate = estimates(fit.model(), fit.params(), Some(id), &ho.fold_params);
-    let explanation = explain(id, fit.model(), fit.params(), &estimate, e.is_some());
+    let absurd = super::limits::absurd_estimate(id, &estimate.iter().collect::<Vec<_>>());
+    // A physically absurd estimate is never a missing effect, however much it helps.
+    let significant = significant(drop, t) && absurd.is_none();
+    let explanation =
+        absurd.unwrap_or_else(|| explain(id, fit.model(), fit.params(), &estimate, e.is_some()));
     Candidate {
         effect: id.to_string(),
         heldout_rms_m: heldout,

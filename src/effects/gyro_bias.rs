@@ -22,6 +22,8 @@ use crate::model::StartGuess;
 pub struct GyroBias {
     /// Level-bias guess on the roll and pitch axes (rad/s).
     level: [f64; 2],
+    /// Heading only: the roll and pitch biases are not fitted (their rates are zero).
+    planar: bool,
 }
 
 /// Prior standard deviation of the roll and pitch biases about the level guess (rad/s).
@@ -29,9 +31,10 @@ const LEVEL_SIGMA: f64 = 0.3 / DEG_PER_RAD;
 
 impl GyroBias {
     /// Centred on the roll and pitch bias of the start guess.
-    pub fn new(start: &StartGuess) -> Self {
+    pub fn new(start: &StartGuess, planar: bool) -> Self {
         Self {
             level: [start.gyro_bias.x, start.gyro_bias.y],
+            planar,
         }
     }
 }
@@ -52,6 +55,10 @@ impl Effect for GyroBias {
 
     fn role(&self) -> Role {
         Role::Step1Only
+    }
+
+    fn fixed(&self, i: usize) -> bool {
+        self.planar && i < 2
     }
 
     fn initial(&self, guess: &StartGuess) -> Vec<f64> {
@@ -134,7 +141,7 @@ mod tests {
             &crate::import::parse(sim.log_csv.as_bytes(), "s").expect("parse"),
         )
         .expect("signals");
-        let e = GyroBias::new(&StartGuess::from_signals(&sig).expect("start"));
+        let e = GyroBias::new(&StartGuess::from_signals(&sig).expect("start"), false);
         let (start, end) = (sim.truth.gyro_bias_start_dps, sim.truth.gyro_bias_end_dps);
         for a in 0..2 {
             let level = e.level[a] * DEG_PER_RAD;

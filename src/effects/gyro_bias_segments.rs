@@ -25,6 +25,8 @@ pub struct GyroBiasSegments {
     prior_weight: f64,
     /// First and last step of each segment (inclusive); empty segments get `None`.
     steps: Vec<Option<(usize, usize)>>,
+    /// Heading only: the roll and pitch biases are not fitted (their rates are zero).
+    planar: bool,
 }
 
 impl GyroBiasSegments {
@@ -75,6 +77,7 @@ impl GyroBiasSegments {
             edges,
             prior_weight,
             steps,
+            planar: signals.attitude.is_planar(),
         })
     }
 
@@ -113,6 +116,10 @@ impl Effect for GyroBiasSegments {
 
     fn role(&self) -> Role {
         Role::Segments
+    }
+
+    fn fixed(&self, i: usize) -> bool {
+        self.planar && i % 3 != 2
     }
 
     fn initial(&self, _guess: &StartGuess) -> Vec<f64> {

@@ -10,7 +10,9 @@
 //! in a ride (step 1's first window) the roll tilt trades off almost freely
 //! against the roll-axis bias. Without the prior a fit could settle on a 20
 //! degree roll with a matching 0.8 deg/s bias that looks fine for two minutes
-//! and then rolls the path over. Heading (`phi_up`) is left free.
+//! and then rolls the path over. Heading (`phi_up`) is left free. In a planar
+//! model (see [`crate::signals::Attitude`]) the tilt is held at zero: a free
+//! tilt of the yaw axis would scale the turns by its cosine.
 
 use nalgebra::Vector3;
 
@@ -18,7 +20,10 @@ use super::{Effect, ParamInfo, PriorRows};
 use crate::model::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
-pub struct InitialOrientation;
+pub struct InitialOrientation {
+    /// Heading only: the tilt is not fitted.
+    pub planar: bool,
+}
 
 /// Prior standard deviation of the start tilt (rad): 10 degrees.
 const TILT_PRIOR_SIGMA_RAD: f64 = 10.0 * std::f64::consts::PI / 180.0;
@@ -37,6 +42,10 @@ impl Effect for InitialOrientation {
 
     fn initial(&self, _guess: &StartGuess) -> Vec<f64> {
         vec![0.0; 3]
+    }
+
+    fn fixed(&self, i: usize) -> bool {
+        self.planar && i < 2
     }
 
     fn initial_orientation(&self, p: &[f64]) -> Option<Vector3<f64>> {

@@ -184,6 +184,11 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn role(&self) -> Role {
         Role::Global
     }
+    /// Whether local parameter `i` is held at its starting value, never
+    /// fitted (the roll and pitch parts of a planar model).
+    fn fixed(&self, _i: usize) -> bool {
+        false
+    }
     /// Starting values, from the guess made before step 1.
     fn initial(&self, guess: &StartGuess) -> Vec<f64>;
 
@@ -431,9 +436,11 @@ pub fn build(
 ) -> Result<Box<dyn Effect>, ModelError> {
     Ok(match id {
         "initial_position" => Box::new(InitialPosition),
-        "initial_orientation" => Box::new(InitialOrientation),
+        "initial_orientation" => Box::new(InitialOrientation {
+            planar: signals.attitude.is_planar(),
+        }),
         "odometer_gain" => Box::new(OdometerGain),
-        "gyro_bias" => Box::new(GyroBias::new(start)),
+        "gyro_bias" => Box::new(GyroBias::new(start, signals.attitude.is_planar())),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,
             spec.segment_s,

@@ -215,6 +215,9 @@ pub struct ImportOptions {
     pub map: Option<PathBuf>,
     /// A second CSV with the GPS fixes of a mapped CSV, joined by time.
     pub gps: Option<PathBuf>,
+    /// The attitude model, `3d` or `planar`, written to the log's `attitude`
+    /// metadata (`None`: as the log says, else chosen from the data).
+    pub attitude: Option<String>,
 }
 
 /// What was read, from where, and what the checks say of it.
@@ -295,6 +298,22 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
             "source".into(),
             format!("{} {}", kind.label(), path.display()),
         );
+    }
+    if let Some(a) = &options.attitude {
+        match a.as_str() {
+            "3d" | "planar" => {
+                log.metadata.insert("attitude".into(), a.clone());
+            }
+            "auto" => {
+                log.metadata.remove("attitude");
+            }
+            other => {
+                return Err(LoadError::File {
+                    file: path.display().to_string(),
+                    message: format!("attitude '{other}' is none of auto, 3d, planar"),
+                });
+            }
+        }
     }
     Ok(checked(log, kind, topics, &options.mount))
 }

@@ -315,13 +315,21 @@ impl Model {
             .collect()
     }
 
+    /// Parameters held at their starting values (see [`Effect::fixed`]).
+    pub fn fixed_mask(&self) -> Vec<bool> {
+        self.effects
+            .iter()
+            .flat_map(|e| (0..e.n_params()).map(|i| e.fixed(i)))
+            .collect()
+    }
+
     /// Which parameters each optimisation step frees.
     pub fn free_mask(&self, roles: &[Role]) -> Vec<bool> {
         let mut mask = vec![false; self.n_params()];
         for (e, effect) in self.effects.iter().enumerate() {
             if roles.contains(&effect.role()) {
-                for m in &mut mask[self.range(e)] {
-                    *m = true;
+                for (i, m) in mask[self.range(e)].iter_mut().enumerate() {
+                    *m = !effect.fixed(i);
                 }
             }
         }
@@ -448,7 +456,7 @@ impl Model {
     }
 
     /// Initial attitude and position for `theta`, and the world-rotation vector `phi`.
-    pub(crate) fn initial_state(
+    pub fn initial_state(
         &self,
         theta: &[f64],
     ) -> (UnitQuaternion<f64>, Vector3<f64>, Vector3<f64>) {
