@@ -902,7 +902,7 @@ pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Res
                 .and_then(|s| eframe::get_value(s, eframe::APP_KEY))
                 .unwrap_or_default();
             let ctx = cc.egui_ctx.clone();
-            let source = ride.map_or_else(sample_ride, |(p, o)| RideSource::Path(p, o));
+            let source = ride.map_or_else(sample_ride, |(p, o)| RideSource::Path(p, Box::new(o)));
             Ok(Box::new(GyropathApp::new(settings, source, move || {
                 ctx.request_repaint()
             })))

@@ -138,5 +138,5 @@ fn reload(
 ) -> Command {
     let mut o = options.clone();
     change(&mut o);
-    Command::Open(RideSource::Path(path.to_path_buf(), o))
+    Command::Open(RideSource::Path(path.to_path_buf(), Box::new(o)))
 }

@@ -30,7 +30,7 @@ const SNAPSHOT_INTERVAL: Duration = Duration::from_millis(50);
 #[derive(Clone, Debug)]
 pub enum RideSource {
     /// A file or rosbag2 folder, and how to read it (topics, mounting, column map).
-    Path(PathBuf, ImportOptions),
+    Path(PathBuf, Box<ImportOptions>),
     /// In-memory bytes (the bundled sample, a dropped file without a path).
     Bytes { name: String, bytes: Arc<[u8]> },
 }
@@ -38,7 +38,7 @@ pub enum RideSource {
 impl RideSource {
     /// A file read with the defaults of its kind.
     pub fn file(path: PathBuf) -> Self {
-        Self::Path(path, ImportOptions::default())
+        Self::Path(path, Box::default())
     }
 
     pub fn name(&self) -> String {
