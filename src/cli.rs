@@ -236,6 +236,17 @@ pub struct SimulateArgs {
     /// No GPS outages.
     #[arg(long)]
     pub no_outages: bool,
+    /// What drives: bicycle (wheel pulses), car (8-20 m/s, lane changes, reversing
+    /// out of a parking bay; wheel speed) or robot (0.5-1 m/s, skid-steer shaking, 2.5 Hz GPS).
+    #[arg(long, default_value = "bicycle")]
+    pub vehicle: String,
+    /// Log only the yaw rate (gx_dps and gy_dps written as 0), as a car's yaw-rate sensor.
+    #[arg(long)]
+    pub yaw_only: bool,
+    /// Write the gyro in other axes or units: the mounting that undoes it, e.g.
+    /// "x=-z,y=-x,z=y" or "x=y,y=-x,z=z,scale=57.29577951308232" (rad/s).
+    #[arg(long)]
+    pub gyro_axes: Option<String>,
     /// Where to write the ride log.
     #[arg(long)]
     pub out: PathBuf,
@@ -606,6 +617,17 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
         hidden: split_list(&args.hidden),
         odometer: args.odometer,
         outages: !args.no_outages,
+        vehicle: args
+            .vehicle
+            .parse()
+            .map_err(|e| anyhow::anyhow!("--vehicle: {e}"))?,
+        yaw_only: args.yaw_only,
+        gyro_axes: args
+            .gyro_axes
+            .as_deref()
+            .map(str::parse)
+            .transpose()
+            .map_err(|e| anyhow::anyhow!("--gyro-axes: {e}"))?,
     };
     let ride = simulation::simulate(&config)?;
     write_atomically(&args.out, None, |w| w.write_all(ride.log_csv.as_bytes()))?;

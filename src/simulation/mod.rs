@@ -27,6 +27,7 @@ use thiserror::Error;
 use crate::geodesy::{Geodetic, LocalFrame};
 use rng::Rng;
 use route::Route;
+pub use route::Vehicle;
 use thermal::Thermal;
 
 /// Effects the simulator can hide in a ride.
@@ -60,6 +61,14 @@ pub struct SimConfig {
     pub odometer: bool,
     /// Include GPS outages.
     pub outages: bool,
+    /// What drives the route (a bicycle logs wheel pulses or `odo_m`, a car
+    /// or robot a signed wheel speed `speed_mps`; a robot's GPS runs at 2.5 Hz).
+    pub vehicle: Vehicle,
+    /// Log only the yaw rate (`gx_dps`, `gy_dps` written as 0), as a car's yaw-rate sensor.
+    pub yaw_only: bool,
+    /// Write the gyro in other axes or units: the mounting that undoes it
+    /// (`x=-z,y=-x,z=y,scale=57.29577951308232` writes rad/s in a Husky's axes).
+    pub gyro_axes: Option<crate::import::Mount>,
 }
 
 impl Default for SimConfig {
@@ -71,6 +80,9 @@ impl Default for SimConfig {
             hidden: Vec::new(),
             odometer: false,
             outages: true,
+            vehicle: Vehicle::Bicycle,
+            yaw_only: false,
+            gyro_axes: None,
         }
     }
 }
@@ -79,6 +91,9 @@ impl Default for SimConfig {
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct SimTruth {
     pub seed: u64,
+    pub vehicle: Vehicle,
+    /// Metres driven in reverse.
+    pub reversed_m: f64,
     pub duration_s: f64,
     pub rate_hz: f64,
     pub hidden: Vec<String>,
@@ -163,7 +178,13 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         )));
     }
     let mut rng = Rng::new(config.seed);
-    let route = Route::plan(&mut rng, config.duration_s);
+    let route = Route::plan_for(config.vehicle, &mut rng, config.duration_s);
+    let bicycle = config.vehicle == Vehicle::Bicycle;
+    let gps_hz = if config.vehicle == Vehicle::Robot {
+        2.5
+    } else {
+        1.0
+    };
     let n = (config.duration_s * config.rate_hz).round() as usize + 1;
     let dt = 1.0 / config.rate_hz;
     let times: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
@@ -247,29 +268,44 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     }
 
     let mut gm = [
-        GaussMarkov::new(&mut rng, 1.5, 60.0, 1.0),
-        GaussMarkov::new(&mut rng, 1.5, 60.0, 1.0),
-        GaussMarkov::new(&mut rng, 3.0, 60.0, 1.0),
+        GaussMarkov::new(&mut rng, 1.5, 60.0, 1.0 / gps_hz),
+        GaussMarkov::new(&mut rng, 1.5, 60.0, 1.0 / gps_hz),
+        GaussMarkov::new(&mut rng, 3.0, 60.0, 1.0 / gps_hz),
     ];
     let mut baro_gm = GaussMarkov::new(&mut rng, 0.2, 30.0, dt);
     let phase = rng.range(0.0, c_true);
 
     let mut log = String::with_capacity(n * 48);
     let _ = writeln!(log, "# gyropath ride log");
-    let _ = writeln!(log, "# wheel_circumference_m: {c_conf:.4}");
-    let _ = writeln!(
-        log,
-        "# generator: gyropath simulate --seed {} --duration {}",
-        config.seed, config.duration_s
-    );
-    let distance_col = if config.odometer {
+    if bicycle {
+        let _ = writeln!(log, "# wheel_circumference_m: {c_conf:.4}");
+        let _ = writeln!(
+            log,
+            "# generator: gyropath simulate --seed {} --duration {}",
+            config.seed, config.duration_s
+        );
+    } else {
+        let _ = writeln!(
+            log,
+            "# generator: gyropath simulate --vehicle {} --seed {} --duration {} --rate {}{}",
+            format!("{:?}", config.vehicle).to_lowercase(),
+            config.seed,
+            config.duration_s,
+            config.rate_hz,
+            if config.yaw_only { " --yaw-only" } else { "" }
+        );
+    }
+    let distance_col = if !bicycle {
+        "speed_mps"
+    } else if config.odometer {
         "odo_m"
     } else {
         "wheel_pulse"
     };
+    let extra_cols = if bicycle { ",baro_alt_m,temp_c" } else { "" };
     let _ = writeln!(
         log,
-        "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m,baro_alt_m,temp_c"
+        "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m{extra_cols}"
     );
     let mut truth_csv = String::with_capacity(n * 44);
     let _ = writeln!(truth_csv, "t_s,lat_deg,lon_deg,alt_m");
@@ -328,10 +364,14 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             (w + bias + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * noise_dps)
                 .map(|v| (v / lsb_dps).round() * lsb_dps)
         };
+        let gyro = logged_gyro(config, gyro);
 
         // Distance.
-        let distance_field = if config.odometer {
-            format!("{:.3}", st.s / (c_true / c_conf))
+        let distance_field = if !bicycle {
+            // Wheel speed, signed, with the odometer's scale error.
+            format!("{:.3}", st.velocity / (c_true / c_conf))
+        } else if config.odometer {
+            format!("{:.3}", st.odo / (c_true / c_conf))
         } else {
             // The reed switch is closed while the magnet is within `window` of it;
             // the row reads 1 if that happened at any time during its step.
@@ -345,7 +385,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         // GPS.
         let mut fix = String::from(",,");
         if t + 0.5 * dt >= next_fix {
-            next_fix += 1.0;
+            next_fix += 1.0 / gps_hz;
             let noise =
                 Vector3::new(
                     gm[0].next(&mut rng),
@@ -381,9 +421,14 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         } else {
             String::new()
         };
+        let tail = if bicycle {
+            format!(",{baro},{temp_field}")
+        } else {
+            String::new()
+        };
         let _ = writeln!(
             log,
-            "{t:.td$},{:.4},{:.4},{:.4},{distance_field},{fix},{baro},{temp_field}",
+            "{t:.td$},{:.4},{:.4},{:.4},{distance_field},{fix}{tail}",
             gyro.x,
             gyro.y,
             gyro.z,
@@ -392,6 +437,8 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     }
     let truth = SimTruth {
         seed: config.seed,
+        vehicle: config.vehicle,
+        reversed_m: route.reversed_m,
         duration_s: config.duration_s,
         rate_hz: config.rate_hz,
         hidden: config.hidden.clone(),
@@ -419,6 +466,24 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         origin,
         truth,
     })
+}
+
+/// The gyro as the log writes it: yaw only, or in other axes and units
+/// (`logged[axis[i]] = ride[i] / (sign[i] scale)`, undone by mounting with `gyro_axes`).
+fn logged_gyro(config: &SimConfig, ride: Vector3<f64>) -> Vector3<f64> {
+    let mut w = ride;
+    if config.yaw_only {
+        w.x = 0.0;
+        w.y = 0.0;
+    }
+    if let Some(m) = &config.gyro_axes {
+        let mut logged = Vector3::zeros();
+        for i in 0..3 {
+            logged[m.axis[i]] = w[i] / (m.sign[i] * m.scale);
+        }
+        w = logged;
+    }
+    w
 }
 
 #[cfg(test)]
