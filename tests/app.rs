@@ -294,3 +294,44 @@ fn a_ros_bag_opens_with_its_topics_and_mounting_shown_and_the_mounting_can_be_ch
         ride.warnings
     );
 }
+
+#[test]
+fn an_unphysical_fit_is_shown_as_no_result() {
+    let bag = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/robot_localization-test1/test1.bag");
+    // Forced to 3D, the robot's fit tilts its sensor 45 deg.
+    let options = gyropath::import::ImportOptions {
+        attitude: Some("3d".into()),
+        ..Default::default()
+    };
+    let app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::Path(bag, Box::new(options)),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| !a.history.is_empty()),
+        "the fit finishes"
+    );
+    h.get_by_value("3D");
+    h.get_by_label("Not physical: this fit is no result.");
+    h.get_by_label_contains("start tilt of the sensor is 45 deg");
+    // Auto chooses the planar model, which is physical.
+    h.get_by_value("3D").click();
+    h.run_steps(2);
+    h.get_by_label("auto (from the data)").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| {
+            a.ride.as_ref().is_some_and(|r| r.planar)
+                && a.snapshot
+                    .as_ref()
+                    .is_some_and(|s| s.phase == gyropath::optimisation::Phase::Done)
+        }),
+        "reloaded planar and fitted"
+    );
+    assert!(
+        h.query_by_label("Not physical: this fit is no result.")
+            .is_none()
+    );
+}

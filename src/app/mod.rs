@@ -545,6 +545,13 @@ impl GyropathApp {
                 ui.label(format!("{}", s.n_params));
                 ui.end_row();
             });
+            if s.phase == Phase::Done && !s.violations.is_empty() {
+                let red = egui::Color32::from_rgb(210, 60, 60);
+                ui.colored_label(red, "Not physical: this fit is no result.");
+                for v in &s.violations {
+                    ui.colored_label(red, v);
+                }
+            }
         }
 
         ui.separator();

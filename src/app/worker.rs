@@ -132,6 +132,8 @@ pub struct Snapshot {
     pub params: Vec<(String, String, f64, String)>,
     pub n_params: usize,
     pub effects: Vec<String>,
+    /// Physical limits the current parameters break (see `diagnosis::limits`).
+    pub violations: Vec<String>,
 }
 
 /// Worker -> UI.
@@ -536,7 +538,12 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
         if effect.segment_edges().is_some() {
             continue;
         }
-        for (info, &v) in effect.params().iter().zip(&theta[model.range(e)]) {
+        let infos = effect.params();
+        for (i, (info, &v)) in infos.iter().zip(&theta[model.range(e)]).enumerate() {
+            // Held parameters (roll and pitch of a planar model) are not results.
+            if effect.fixed(i) {
+                continue;
+            }
             params.push((
                 effect.id(),
                 info.name.clone(),
@@ -556,5 +563,9 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
         params,
         n_params: model.n_params(),
         effects: model.effect_ids(),
+        violations: crate::diagnosis::limits::check(model, theta)
+            .iter()
+            .map(ToString::to_string)
+            .collect(),
     }
 }
