@@ -690,6 +690,13 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     if !args.quiet {
         println!("time      {:.2} s", started.elapsed().as_secs_f64());
     }
+    if !diagnosis.not_physical.is_empty() {
+        anyhow::bail!(
+            "{}: the model's own fit is not physical, so nothing it lacks can be told:\n  {}",
+            args.ride.display(),
+            diagnosis.not_physical.join("\n  ")
+        );
+    }
     Ok(())
 }
 
@@ -747,6 +754,13 @@ fn print_diagnosis(d: &Diagnosis) {
             if c.significant { "yes" } else { "no" },
             est.join(", ")
         );
+    }
+    if !d.not_physical.is_empty() {
+        println!();
+        println!(
+            "not physical: the model's own fit breaks a physical limit (below); fix the axes or units first"
+        );
+        return;
     }
     if let Some(best) = d.ranking.first().filter(|c| c.significant) {
         println!();

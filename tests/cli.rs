@@ -415,3 +415,33 @@ fn the_husky_is_planar_physical_and_diagnose_finds_nothing_absurd() {
         }
     }
 }
+
+#[test]
+fn diagnose_on_an_unphysical_fit_says_so_and_marks_nothing_significant() {
+    let dir = tempfile::tempdir().unwrap();
+    let diag = dir.path().join("d.json");
+    let out = gyropath(&[
+        "diagnose",
+        &format!("{HUSKY}/test1.bag"),
+        "--mount",
+        "none",
+        "--attitude",
+        "3d",
+        "--quiet",
+        "--json",
+        s(&diag),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("the model's own fit is not physical"), "{err}");
+    let d: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&diag).unwrap()).unwrap();
+    assert!(!d["not_physical"].as_array().unwrap().is_empty());
+    assert!(
+        d["ranking"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|c| c["significant"] == false)
+    );
+}

@@ -737,6 +737,16 @@ impl GyropathApp {
         if stale {
             ui.label("(for an earlier model: diagnose again)");
         }
+        if !d.not_physical.is_empty() {
+            let red = egui::Color32::from_rgb(210, 60, 60);
+            ui.colored_label(
+                red,
+                "The model's own fit is not physical: fix the axes or units first (Source panel).",
+            );
+            for v in &d.not_physical {
+                ui.colored_label(red, v);
+            }
+        }
         egui::ScrollArea::vertical()
             .id_salt("diagnosis-scroll")
             .show(ui, |ui| {

@@ -84,6 +84,9 @@ pub struct Diagnosis {
     pub estimate: BTreeMap<String, Estimate>,
     /// Residual and segment-bias correlations with candidate signals, strongest first.
     pub structure: Vec<super::Correlation>,
+    /// Physical limits the base model's own fit breaks: then it is no
+    /// result, no candidate is significant, and the axes or units come first.
+    pub not_physical: Vec<String>,
 }
 
 /// Fit `settings.model` on the ride, then rank the missing effects.
@@ -141,6 +144,15 @@ pub fn diagnose_fitted(
             .then(a.heldout_rms_m.total_cmp(&b.heldout_rms_m))
     });
     let traj = model.trajectory(theta);
+    let not_physical: Vec<String> = super::limits::check(model, theta)
+        .iter()
+        .map(ToString::to_string)
+        .collect();
+    if !not_physical.is_empty() {
+        for c in &mut ranking {
+            c.significant = false;
+        }
+    }
     Ok(Diagnosis {
         model: present,
         fit_rms_m: fit_rms,
@@ -151,6 +163,7 @@ pub fn diagnose_fitted(
         ranking,
         estimate: estimates(model, theta, None, &base.fold_params),
         structure: super::structure(model, theta),
+        not_physical,
     })
 }
 
