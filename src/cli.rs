@@ -247,6 +247,13 @@ pub struct SimulateArgs {
     /// "x=-z,y=-x,z=y" or "x=y,y=-x,z=z,scale=57.29577951308232" (rad/s).
     #[arg(long)]
     pub gyro_axes: Option<String>,
+    /// GPS environment: open sky, or urban (street canyons, heavy tails, fixes pulled
+    /// to one side, jumps of 10-70 m; logs gps_hacc_m and sats).
+    #[arg(long, default_value = "open")]
+    pub gps: String,
+    /// The gyro bias's random-walk density (deg/s/sqrt(s)); drawn in 0.002-0.004 when not given.
+    #[arg(long)]
+    pub bias_walk: Option<f64>,
     /// Where to write the ride log.
     #[arg(long)]
     pub out: PathBuf,
@@ -628,6 +635,11 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
             .map(str::parse)
             .transpose()
             .map_err(|e| anyhow::anyhow!("--gyro-axes: {e}"))?,
+        gps: args
+            .gps
+            .parse()
+            .map_err(|e| anyhow::anyhow!("--gps: {e}"))?,
+        bias_walk_dps_sqrt_s: args.bias_walk,
     };
     let ride = simulation::simulate(&config)?;
     write_atomically(&args.out, None, |w| w.write_all(ride.log_csv.as_bytes()))?;

@@ -18,6 +18,7 @@
 pub mod rng;
 pub mod route;
 pub mod thermal;
+pub mod urban;
 
 use std::fmt::Write as _;
 
@@ -29,6 +30,8 @@ use rng::Rng;
 use route::Route;
 pub use route::Vehicle;
 use thermal::Thermal;
+pub use urban::GpsEnvironment;
+use urban::UrbanGps;
 
 /// Effects the simulator can hide in a ride.
 pub const HIDDEN_EFFECTS: [&str; 5] = [
@@ -69,6 +72,10 @@ pub struct SimConfig {
     /// Write the gyro in other axes or units: the mounting that undoes it
     /// (`x=-z,y=-x,z=y,scale=57.29577951308232` writes rad/s in a Husky's axes).
     pub gyro_axes: Option<crate::import::Mount>,
+    /// Open sky, or a city (see [`urban`]): urban rides also log `gps_hacc_m` and `sats`.
+    pub gps: GpsEnvironment,
+    /// The gyro bias's random-walk density (deg/s/sqrt(s)); `None`: drawn in 0.002-0.004.
+    pub bias_walk_dps_sqrt_s: Option<f64>,
 }
 
 impl Default for SimConfig {
@@ -83,6 +90,8 @@ impl Default for SimConfig {
             vehicle: Vehicle::Bicycle,
             yaw_only: false,
             gyro_axes: None,
+            gps: GpsEnvironment::Open,
+            bias_walk_dps_sqrt_s: None,
         }
     }
 }
@@ -116,6 +125,10 @@ pub struct SimTruth {
     /// Bias per degree C (deg/s/C).
     pub temp_coefficient_dps_per_c: Option<[f64; 3]>,
     pub gps_outlier_episodes: Vec<(f64, f64, f64)>,
+    pub gps: GpsEnvironment,
+    /// Urban street canyons (start, end, sideways pull m) and jumps (start, end, size m).
+    pub urban_canyons: Vec<(f64, f64, f64)>,
+    pub urban_jumps: Vec<(f64, f64, f64)>,
     pub baro_offset_m: f64,
     pub baro_drift_m_per_h: f64,
 }
@@ -200,7 +213,13 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     let c_true = 2.105;
     let c_conf = c_true * (1.0 + rng.sign() * rng.range(0.01, 0.04));
     let bias0 = Vector3::new(rng.normal() * 0.4, rng.normal() * 0.4, rng.normal() * 0.4);
-    let bias_walk = rng.range(0.002, 0.004);
+    let drawn_walk = rng.range(0.002, 0.004);
+    let bias_walk = config.bias_walk_dps_sqrt_s.unwrap_or(drawn_walk);
+    if !(bias_walk.is_finite() && bias_walk >= 0.0) {
+        return Err(SimulationError::Setting(format!(
+            "bias walk must be a non-negative number of deg/s/sqrt(s), got {bias_walk}"
+        )));
+    }
     let noise_dps = 0.07;
     let lsb_dps = 1.0 / 65.5;
     let temp_air = rng.range(8.0, 18.0);
@@ -302,7 +321,19 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
     } else {
         "wheel_pulse"
     };
-    let extra_cols = if bicycle { ",baro_alt_m,temp_c" } else { "" };
+    let urban = config.gps == GpsEnvironment::Urban;
+    let mut city = urban.then(|| {
+        UrbanGps::new(
+            Rng::new(config.seed ^ 0x0C17_5CA9_E0F5_1DE5),
+            config.duration_s,
+        )
+    });
+    let extra_cols = match (bicycle, urban) {
+        (true, false) => ",baro_alt_m,temp_c",
+        (true, true) => ",baro_alt_m,temp_c,gps_hacc_m,sats",
+        (false, false) => "",
+        (false, true) => ",gps_hacc_m,sats",
+    };
     let _ = writeln!(
         log,
         "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m{extra_cols}"
@@ -384,6 +415,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
 
         // GPS.
         let mut fix = String::from(",,");
+        let mut urban_fields = String::from(",,");
         if t + 0.5 * dt >= next_fix {
             next_fix += 1.0 / gps_hz;
             let noise =
@@ -401,6 +433,12 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
                     if t >= e.0 && t < e.1 {
                         p += j;
                     }
+                }
+                if let Some(c) = city.as_mut() {
+                    let f = st.attitude * Vector3::x();
+                    let u = c.fix(t, f.y.atan2(f.x));
+                    p += u.offset;
+                    urban_fields = format!(",{:.1},{}", u.hacc, u.satellites);
                 }
                 let gp = frame.to_geodetic(&p);
                 fix = format!("{:.8},{:.8},{:.1}", gp.lat_deg, gp.lon_deg, gp.alt_m);
@@ -421,11 +459,14 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         } else {
             String::new()
         };
-        let tail = if bicycle {
+        let mut tail = if bicycle {
             format!(",{baro},{temp_field}")
         } else {
             String::new()
         };
+        if urban {
+            tail.push_str(&urban_fields);
+        }
         let _ = writeln!(
             log,
             "{t:.td$},{:.4},{:.4},{:.4},{distance_field},{fix}{tail}",
@@ -456,6 +497,9 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         mount_misalignment_deg: misalign,
         temp_coefficient_dps_per_c: temp_coeff,
         gps_outlier_episodes: episodes,
+        gps: config.gps,
+        urban_canyons: city.as_ref().map(|c| c.episodes().0).unwrap_or_default(),
+        urban_jumps: city.as_ref().map(|c| c.episodes().1).unwrap_or_default(),
         baro_offset_m: baro_offset,
         baro_drift_m_per_h: baro_drift,
     };
