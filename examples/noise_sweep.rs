@@ -6,8 +6,8 @@
 //! path's error against the truth at the fixes and the held-out RMS of the
 //! default validation (5 folds of 60 s blocks).
 //!
-//! `cargo run --release --example noise_sweep -- [duration_s] [walk] [seeds...]`
-//! (defaults: 1200 s, 0.004 deg/s/sqrt(s), seeds 1 2 3)
+//! `cargo run --release --example noise_sweep -- [duration_s] [walk] [guard_s] [seeds...]`
+//! (defaults: 1200 s, 0.004 deg/s/sqrt(s), no guard band, seeds 1 2 3)
 
 use std::sync::Arc;
 
@@ -21,6 +21,11 @@ fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let duration: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(1200.0);
     let walk: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(0.004);
+    let guard: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(0.0);
+    let folds = Folds {
+        guard_s: guard,
+        ..Folds::default()
+    };
     let mut seeds: Vec<u64> = args.filter_map(|a| a.parse().ok()).collect();
     if seeds.is_empty() {
         seeds = vec![1, 2, 3];
@@ -28,7 +33,7 @@ fn main() -> anyhow::Result<()> {
     let priors = [0.0005, 0.001, 0.002, 0.004, 0.008];
     let sigmas = [1.5, 3.0, 6.0];
     println!(
-        "{duration:.0} s rides, true bias walk {walk} deg/s/sqrt(s), GPS error correlated over 60 s"
+        "{duration:.0} s rides, true bias walk {walk} deg/s/sqrt(s), GPS error correlated over 60 s, guard band {guard} s"
     );
     println!(
         "{:>5} {:>9} {:>8} {:>10} {:>10} {:>10}",
@@ -55,7 +60,7 @@ fn main() -> anyhow::Result<()> {
                 let mut fit = Reconstruction::new(sig.clone(), settings.clone())?;
                 fit.finish();
                 let e = sim.errors(&sig, &fit.trajectory().p);
-                let ho = held_out(fit.model(), fit.params(), &settings, &Folds::default())?;
+                let ho = held_out(fit.model(), fit.params(), &settings, &folds)?;
                 let heldout = ho.rms(&vec![true; sig.fixes.len()]);
                 println!(
                     "{seed:>5} {prior:>9} {sigma:>8} {:>10.2} {:>10.3} {heldout:>10.3}",

@@ -179,6 +179,9 @@ pub struct DiagnoseArgs {
     /// Length of a validation block of GPS fixes (s).
     #[arg(long, default_value_t = 60.0)]
     pub block_s: f64,
+    /// h-block guard band (s): fixes this close to a withheld block are neither fitted nor scored.
+    #[arg(long, default_value_t = 0.0)]
+    pub guard_s: f64,
     /// Print nothing but errors and the table.
     #[arg(long, short)]
     pub quiet: bool,
@@ -684,6 +687,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     let folds = Folds {
         block_s: args.block_s,
         k: args.folds,
+        guard_s: args.guard_s,
     };
     let quiet = args.quiet;
     let progress = move |msg: &str| {

@@ -29,6 +29,11 @@ pub struct Folds {
     pub block_s: f64,
     /// Number of folds.
     pub k: usize,
+    /// h-block validation: fixes within this long (s) of a withheld block are
+    /// neither fitted nor scored, so that GPS error correlated over about
+    /// that long cannot carry a withheld block's error in from its
+    /// neighbours. 0: only the block itself is withheld.
+    pub guard_s: f64,
 }
 
 impl Default for Folds {
@@ -36,6 +41,7 @@ impl Default for Folds {
         Self {
             block_s: 60.0,
             k: 5,
+            guard_s: 0.0,
         }
     }
 }
@@ -67,7 +73,29 @@ impl Folds {
             // The last fix, at exactly `duration_s`, falls inside the last block.
             block_s: duration_s / blocks * (1.0 + 1e-9),
             k,
+            guard_s: self.guard_s,
         }
+    }
+
+    /// Whether a fix at `t` lies within the guard band of a block of fold `f`
+    /// (but not in one: those are withheld anyway).
+    pub fn guarded(&self, t: f64, t0: f64, last: usize, f: usize) -> bool {
+        if self.guard_s <= 0.0 {
+            return false;
+        }
+        let (a, b) = (
+            self.block(t - self.guard_s, t0),
+            self.block(t + self.guard_s, t0),
+        );
+        (a..=b.min(last)).any(|c| {
+            self.fold_of_block(c, last) == Some(f) && {
+                let (start, end) = (
+                    t0 + c as f64 * self.block_s,
+                    t0 + (c + 1) as f64 * self.block_s,
+                );
+                t > start - self.guard_s && t < end + self.guard_s
+            }
+        })
     }
 }
 
@@ -172,7 +200,8 @@ pub fn held_out(
         .into_par_iter()
         .filter(|&f| fold_of.contains(&Some(f)))
         .map(|f| {
-            let train = model.withholding(|t| fold_at(t) != Some(f))?;
+            let train =
+                model.withholding(|t| fold_at(t) != Some(f) && !folds.guarded(t, t0, last, f))?;
             let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
             fit.finish();
             let iterations = fit.history().len();
