@@ -745,6 +745,28 @@ fn print_diagnosis(d: &Diagnosis) {
         .map(|c| format!("{} ~ {} r={:+.2}", c.quantity, c.signal, c.r))
         .collect();
     println!("structure {}", strong.join(", "));
+    if let Some(w) = &d.whiteness {
+        let parts: Vec<String> = w
+            .iter()
+            .map(|c| {
+                format!(
+                    "{} {} (Ljung-Box Q {:.0} over {} lags, p {}{})",
+                    c.component,
+                    if c.white() { "white" } else { "not white" },
+                    c.ljung_box_q,
+                    c.lags,
+                    if c.p_value < 1e-12 {
+                        "< 1e-12".to_string()
+                    } else {
+                        format!("{:.1e}", c.p_value)
+                    },
+                    c.correlation_time_s
+                        .map_or(String::new(), |t| format!(", correlated over ~{t:.0} s"))
+                )
+            })
+            .collect();
+        println!("whiteness {}", parts.join("; "));
+    }
     println!();
     println!(
         "{:<5}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",

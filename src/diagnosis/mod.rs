@@ -6,11 +6,13 @@ pub mod ranking;
 pub mod residuals;
 pub mod structure;
 pub mod validation;
+pub mod whiteness;
 
 pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
 pub use residuals::{FixResidual, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
 pub use validation::{Folds, HeldOut, held_out};
+pub use whiteness::{Whiteness, whiteness};
 
 use crate::effects::DEG_PER_RAD;
 use crate::model::Model;

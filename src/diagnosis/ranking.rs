@@ -87,6 +87,8 @@ pub struct Diagnosis {
     /// Physical limits the base model's own fit breaks: then it is no
     /// result, no candidate is significant, and the axes or units come first.
     pub not_physical: Vec<String>,
+    /// Whether the GPS residuals are white (east, north), and over how long they are correlated.
+    pub whiteness: Option<Vec<super::Whiteness>>,
 }
 
 /// Fit `settings.model` on the ride, then rank the missing effects.
@@ -144,6 +146,7 @@ pub fn diagnose_fitted(
             .then(a.heldout_rms_m.total_cmp(&b.heldout_rms_m))
     });
     let traj = model.trajectory(theta);
+    let residuals = fix_residuals(model, theta, &traj);
     let not_physical: Vec<String> = super::limits::check(model, theta)
         .iter()
         .map(ToString::to_string)
@@ -157,13 +160,14 @@ pub fn diagnose_fitted(
         model: present,
         fit_rms_m: fit_rms,
         heldout_rms_m: base_rms,
-        residual_rms: ResidualRms::of(&fix_residuals(model, theta, &traj)),
+        residual_rms: ResidualRms::of(&residuals),
         folds: *folds,
         excluded_fixes: use_fix.iter().filter(|&&u| !u).count(),
         ranking,
         estimate: estimates(model, theta, None, &base.fold_params),
         structure: super::structure(model, theta),
         not_physical,
+        whiteness: super::whiteness(&residuals),
     })
 }
 
