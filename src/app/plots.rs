@@ -6,7 +6,9 @@
 //! map marks.
 
 use egui::{Color32, Id};
-use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine};
+use egui_plot::{
+    GridInput, GridMark, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine,
+};
 
 use super::worker::{RideView, Snapshot};
 use crate::optimisation::IterationReport;
@@ -26,6 +28,69 @@ const RESIDUAL_BINS: [(f64, Color32); 4] = [
     (5.0, Color32::from_rgb(255, 160, 60)),
     (f64::INFINITY, Color32::from_rgb(240, 60, 60)),
 ];
+
+/// The smallest 1, 2 or 5 times a power of ten at or above `x` (> 0).
+fn nice_step(x: f64) -> f64 {
+    let p = 10f64.powf(x.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * p)
+        .find(|&s| s >= x * (1.0 - 1e-12))
+        .unwrap_or(10.0 * p)
+}
+
+/// A grid of 1-2-5 steps whose coarsest level, the one that carries tick
+/// labels, is at least nine grid spacings (about 70 points) apart, with each
+/// finer level dividing the next. The default log-10 grid labels only powers
+/// of ten: on a 150 m map only "0" was left on the east axis.
+pub fn nice_grid(input: GridInput) -> Vec<GridMark> {
+    if !(input.base_step_size.is_finite() && input.base_step_size > 0.0) {
+        return Vec::new();
+    }
+    let label = nice_step(9.0 * input.base_step_size);
+    let finer = |s: f64| {
+        let mantissa = (s / 10f64.powf(s.log10().floor())).round();
+        if mantissa == 2.0 { s / 2.0 } else { s / 5.0 }
+    };
+    let mid = finer(label);
+    let fine = finer(mid);
+    let (lo, hi) = input.bounds;
+    let mut marks = Vec::new();
+    let first = (lo / fine).ceil() as i64;
+    let last = (hi / fine).floor() as i64;
+    if last - first > 10_000 {
+        return marks;
+    }
+    for k in first..=last {
+        let value = k as f64 * fine;
+        let on = |s: f64| ((value / s).round() * s - value).abs() < 1e-9 * s;
+        let step_size = if on(label) {
+            label
+        } else if on(mid) {
+            mid
+        } else {
+            fine
+        };
+        marks.push(GridMark { value, step_size });
+    }
+    marks
+}
+
+/// A tick label with as many decimals as its 1-2-5 step needs (egui_plot's
+/// default rounds `-log10(step)`, which gives 0.5 no decimal: "-0").
+pub fn tick_label(mark: GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
+    let decimals = (-mark.step_size.log10()).ceil().max(0.0) as usize;
+    let text = format!("{:.*}", decimals, mark.value);
+    if text
+        .trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
+        "0".into()
+    } else {
+        text
+    }
+}
 
 fn time_group() -> Id {
     Id::unique("gyropath-time-axis")
@@ -87,6 +152,10 @@ pub fn map_ui(
 ) {
     Plot::new("map")
         .data_aspect(1.0)
+        .x_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid)
+        .x_axis_formatter(tick_label)
+        .y_axis_formatter(tick_label)
         .legend(Legend::default())
         .x_axis_label("east (m)")
         .y_axis_label("north (m)")
@@ -159,6 +228,8 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
         .height(height)
         .legend(Legend::default())
         .x_axis_label("iteration")
+        .x_grid_spacer(nice_grid)
+        .x_axis_formatter(tick_label)
         .y_axis_formatter(|mark, _| format!("{:.0e}", 10f64.powf(mark.value)))
         .show(ui, |plot| {
             // log10 of a positive, finite value per iteration.
@@ -206,6 +277,44 @@ fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
         .link_cursor(time_group(), [true, false])
         .x_axis_label("time (s)")
         .y_axis_label(y_label.to_string())
+        .x_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid)
+        .x_axis_formatter(tick_label)
+        .y_axis_formatter(tick_label)
+}
+
+#[cfg(test)]
+mod grid_tests {
+    use super::*;
+
+    #[test]
+    fn the_grid_labels_a_150_m_map_every_50_m() {
+        // 150 m over 400 points, grid lines no closer than 8 points: 3 m.
+        let marks = nice_grid(GridInput {
+            bounds: (-60.0, 90.0),
+            base_step_size: 3.0,
+        });
+        let labelled: Vec<f64> = marks
+            .iter()
+            .filter(|m| m.step_size == 50.0)
+            .map(|m| m.value)
+            .collect();
+        assert_eq!(labelled, vec![-50.0, 0.0, 50.0]);
+        // Every finer level divides the coarser one.
+        assert!(
+            marks
+                .iter()
+                .all(|m| [2.0, 10.0, 50.0].contains(&m.step_size))
+        );
+        assert_eq!(nice_step(0.03), 0.05);
+        let mark = |value: f64, step_size: f64| GridMark { value, step_size };
+        assert_eq!(tick_label(mark(-0.5, 0.5), &(0.0..=1.0)), "-0.5");
+        assert_eq!(tick_label(mark(0.25, 0.05), &(0.0..=1.0)), "0.25");
+        assert_eq!(tick_label(mark(-800.0, 200.0), &(0.0..=1.0)), "-800");
+        assert_eq!(tick_label(mark(-1e-17, 0.2), &(0.0..=1.0)), "0");
+        assert_eq!(nice_step(2.0), 2.0);
+        assert_eq!(nice_step(7.0), 10.0);
+    }
 }
 
 /// Total gyro bias (constant + segment), three axes, as steps over time.
