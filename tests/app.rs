@@ -335,3 +335,26 @@ fn an_unphysical_fit_is_shown_as_no_result() {
             .is_none()
     );
 }
+
+#[test]
+fn file_examples_opens_a_ride_with_something_to_find() {
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .snapshot
+        .is_some()));
+    // The bundled sample says where to find a ride with something missing.
+    h.get_by_label_contains("File > Examples has rides with something to find");
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Examples").hover();
+    h.run_steps(3);
+    h.get_by_label("GPS lag (simulated bicycle)").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .ride
+            .as_ref()
+            .is_some_and(|r| r.source.name().contains("hidden-gps-lag"))),
+        "the example loads"
+    );
+}

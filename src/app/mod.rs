@@ -6,6 +6,7 @@
 //! they collect [`Command`]s that are applied after the frame. The UI holds no
 //! physics: it sends settings to the [`worker`] and draws its snapshots.
 
+pub mod examples;
 pub mod plots;
 pub mod source;
 pub mod worker;
@@ -422,6 +423,7 @@ impl GyropathApp {
                 if ui.button("Open the sample ride").clicked() {
                     commands.push(Command::Open(sample_ride()));
                 }
+                ui.menu_button("Examples", |ui| examples::examples_menu_ui(ui, commands));
                 ui.menu_button("Recent", |ui| {
                     if self.settings.recent.is_empty() {
                         ui.label("(none yet)");
@@ -724,6 +726,15 @@ impl GyropathApp {
         });
         let Some(d) = &self.diagnosis else {
             ui.label("Diagnose ranks every effect the model lacks by the held-out error it saves.");
+            if self
+                .ride
+                .as_ref()
+                .is_some_and(|r| matches!(r.source, RideSource::Bytes { .. }))
+            {
+                ui.label(
+                    "This sample has nothing missing, so Diagnose finds nothing here: File > Examples has rides with something to find.",
+                );
+            }
             return;
         };
         ui.label(format!(
