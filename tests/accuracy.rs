@@ -220,3 +220,24 @@ fn a_straight_start_does_not_roll_the_sensor_over() {
         e.fixes_m
     );
 }
+
+/// The figure the app leads its progress plot with falls: step 1's windows
+/// grow (their own cost rises), but the whole ride's GPS RMS ends far below
+/// where it started and at the fit's final RMS.
+#[test]
+fn the_whole_ride_rms_falls_and_ends_at_the_fit() {
+    let (_, sig) = common::ride(8, 900.0, &[]);
+    let mut fit = Reconstruction::new(sig, FitSettings::default()).unwrap();
+    fit.finish();
+    let h = fit.history();
+    let (first, last) = (h[0].ride_rms_m, h[h.len() - 1].ride_rms_m);
+    assert!(last < 0.5 * first, "whole-ride RMS {first} -> {last}");
+    assert!((last - fit.stats().rms_horizontal_m).abs() < 1e-9);
+    // The window's own cost is what rose.
+    let step1: Vec<f64> = h
+        .iter()
+        .filter(|r| r.phase == Phase::Step1)
+        .map(|r| r.cost)
+        .collect();
+    assert!(step1.iter().any(|&c| c > step1[0]), "{step1:?}");
+}

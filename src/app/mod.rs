@@ -847,7 +847,7 @@ impl GyropathApp {
                     return;
                 };
                 let h = ((avail.y - 3.0 * 24.0) / 3.0).max(60.0);
-                ui.label("Cost per iteration (log scale; step 1 grows its window)");
+                ui.label("Fit progress (log scale): GPS RMS over the whole ride; grey lines end a step, red ones mark a settings change");
                 plots::cost_ui(ui, snap, h);
                 ui.label("Gyro bias per segment");
                 hover = hover.or(plots::bias_ui(ui, ride, snap, h).0);

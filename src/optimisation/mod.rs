@@ -136,6 +136,12 @@ pub struct IterationReport {
     /// Horizontal distance RMS between path and GPS fixes (m), over the
     /// fixes the iteration fitted: in step 1 those of its window.
     pub rms_horizontal_m: f64,
+    /// The same over the whole ride: the figure that falls as the fit
+    /// proceeds (a growing window's own cost and RMS rise as it takes in
+    /// more of the ride). In step 1 it is evaluated when the window widens
+    /// and when the step ends (a whole-ride sweep per iteration would cost
+    /// long rides what the anchored windows save) and carried in between.
+    pub ride_rms_m: f64,
     pub damping: f64,
     pub step_size: f64,
     /// The settings changed just before this iteration.
@@ -207,6 +213,8 @@ pub struct Reconstruction {
     /// Step 1 has moved past its first window: from here on it fits the
     /// segment biases instead of the constant bias (when the model has a prior).
     widened: bool,
+    /// The last whole-ride RMS (see [`IterationReport::ride_rms_m`]).
+    ride_rms_m: Option<f64>,
 }
 
 /// Step 1's window: the first `length` seconds of the ride, seen by `model`.
@@ -290,6 +298,7 @@ impl Reconstruction {
             stage_iterations: 0,
             settings_changed: false,
             history: Vec::new(),
+            ride_rms_m: None,
             window: None,
             widened,
         })
@@ -577,6 +586,13 @@ impl Reconstruction {
             (None, _, _) => FitStats::of(&self.model, &self.theta),
         }
         .rms_horizontal_m;
+        let windowed = phase == Phase::Step1 && self.window.is_some();
+        let ride_rms_m = match self.ride_rms_m {
+            Some(r) if windowed && outcome.evaluation.is_some() && !finished => r,
+            _ if windowed || finished => FitStats::of(&self.model, &self.theta).rms_horizontal_m,
+            _ => rms_horizontal_m,
+        };
+        self.ride_rms_m = Some(ride_rms_m);
         let report = IterationReport {
             iteration: self.iteration,
             phase,
@@ -588,6 +604,7 @@ impl Reconstruction {
             cost: outcome.cost,
             accepted: outcome.accepted,
             rms_horizontal_m,
+            ride_rms_m,
             damping: self.lm.lambda,
             step_size: self.gd.gamma,
             settings_changed: std::mem::take(&mut self.settings_changed),
