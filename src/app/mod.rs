@@ -673,7 +673,7 @@ impl GyropathApp {
             return;
         }
         if self.history.iter().any(|r| r.heldout_rms_m.is_some()) {
-            plots::history_ui(ui, &self.history, 90.0);
+            plots::history_ui(ui, &self.history, 110.0);
         }
         egui::ScrollArea::vertical()
             .id_salt("history-scroll")

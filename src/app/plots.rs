@@ -44,10 +44,21 @@ fn nice_step(x: f64) -> f64 {
 /// finer level dividing the next. The default log-10 grid labels only powers
 /// of ten: on a 150 m map only "0" was left on the east axis.
 pub fn nice_grid(input: GridInput) -> Vec<GridMark> {
+    nice_grid_spaced(input, 9.0)
+}
+
+/// The same for a vertical axis, whose labels need only about 20 points:
+/// labels four grid spacings apart, so a short plot still shows its scale.
+pub fn nice_grid_y(input: GridInput) -> Vec<GridMark> {
+    nice_grid_spaced(input, 4.0)
+}
+
+/// 1-2-5 marks, labelled every `label_spacings` grid spacings or more.
+fn nice_grid_spaced(input: GridInput, label_spacings: f64) -> Vec<GridMark> {
     if !(input.base_step_size.is_finite() && input.base_step_size > 0.0) {
         return Vec::new();
     }
-    let label = nice_step(9.0 * input.base_step_size);
+    let label = nice_step(label_spacings * input.base_step_size);
     let finer = |s: f64| {
         let mantissa = (s / 10f64.powf(s.log10().floor())).round();
         if mantissa == 2.0 { s / 2.0 } else { s / 5.0 }
@@ -153,7 +164,7 @@ pub fn map_ui(
     Plot::new("map")
         .data_aspect(1.0)
         .x_grid_spacer(nice_grid)
-        .y_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid_y)
         .x_axis_formatter(tick_label)
         .y_axis_formatter(tick_label)
         .legend(Legend::default())
@@ -326,7 +337,7 @@ pub fn history_ui(ui: &mut egui::Ui, history: &[super::HistoryRow], height: f32)
                 String::new()
             }
         })
-        .y_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid_y)
         .y_axis_formatter(tick_label)
         .include_y(0.0)
         .include_x(0.5)
@@ -373,7 +384,7 @@ fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
         .x_axis_label("time (s)")
         .y_axis_label(y_label.to_string())
         .x_grid_spacer(nice_grid)
-        .y_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid_y)
         .x_axis_formatter(tick_label)
         .y_axis_formatter(tick_label)
 }
