@@ -5,9 +5,20 @@
 //! runs; [`GyropathApp`] adds the runtime state. Widgets do not act directly:
 //! they collect [`Command`]s that are applied after the frame. The UI holds no
 //! physics: it sends settings to the [`worker`] and draws its snapshots.
+//!
+//! This file holds the state and the Command loop; each panel is a file of
+//! its own (`impl GyropathApp` blocks): `menu`, `source`, `fit_panel`,
+//! `settings_panel`, `effects_panel`, `plots`, `history_panel`,
+//! `diagnosis_panel`, `examples`.
 
+mod diagnosis_panel;
+mod effects_panel;
 pub mod examples;
+mod fit_panel;
+mod history_panel;
+mod menu;
 pub mod plots;
+mod settings_panel;
 pub mod source;
 pub mod worker;
 
@@ -16,8 +27,7 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender};
 
 use crate::effects;
-use crate::model::DEFAULT_BIAS_WALK;
-use crate::optimisation::{FitSettings, Method, Phase};
+use crate::optimisation::{FitSettings, Phase};
 use worker::{ExportKind, Request, RideSource, RideView, Snapshot, Update, WorkerHandle};
 
 /// The bundled sample ride (the one the app opens first).
@@ -346,7 +356,7 @@ impl GyropathApp {
                 self.worker.send(Request::Diagnose);
             }
             Command::AddEffect(id) => {
-                set_effect(&mut self.settings.fit.model.effects, &id, true);
+                effects_panel::set_effect(&mut self.settings.fit.model.effects, &id, true);
                 self.worker
                     .send(Request::Settings(self.settings.fit.clone()));
                 self.worker.send(Request::Run);
@@ -403,462 +413,26 @@ impl GyropathApp {
                 .request_repaint_after(std::time::Duration::from_millis(100));
         }
     }
+}
 
-    fn dropped_files(&mut self, ui: &egui::Ui, commands: &mut Vec<Command>) {
-        let dropped = ui.ctx().input(|i| i.raw.dropped_files.clone());
-        if let Some(f) = dropped.into_iter().next() {
-            commands.push(Command::Open(RideSource::file(f.path().to_path_buf())));
-        }
-    }
-
-    fn menu_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
-        egui::MenuBar::new().ui(ui, |ui| {
-            ui.menu_button("File", |ui| {
-                if ui.button("Open ride or bag...").clicked() {
-                    commands.push(Command::PickRide);
-                }
-                if ui.button("Open ROS 2 bag folder...").clicked() {
-                    commands.push(Command::PickBagFolder);
-                }
-                if ui.button("Open the sample ride").clicked() {
-                    commands.push(Command::Open(sample_ride()));
-                }
-                ui.menu_button("Examples", |ui| examples::examples_menu_ui(ui, commands));
-                ui.menu_button("Recent", |ui| {
-                    if self.settings.recent.is_empty() {
-                        ui.label("(none yet)");
-                    }
-                    for p in &self.settings.recent {
-                        if ui.button(p.display().to_string()).clicked() {
-                            commands.push(Command::Open(RideSource::file(p.clone())));
-                        }
-                    }
-                });
-                ui.separator();
-                let fitted = self.snapshot.is_some();
-                for (label, kind) in [
-                    ("Export path (CSV)...", ExportKind::PathCsv),
-                    ("Export path (GPX)...", ExportKind::PathGpx),
-                    ("Export fit report (JSON)...", ExportKind::ReportJson),
-                ] {
-                    if ui.add_enabled(fitted, egui::Button::new(label)).clicked() {
-                        commands.push(Command::PickExport(kind));
-                    }
-                }
-            });
-            ui.separator();
-            match (&self.loading, &self.ride) {
-                (Some(name), _) => {
-                    ui.spinner();
-                    ui.label(format!("Loading {name}..."));
-                }
-                (None, Some(r)) => {
-                    ui.label(format!(
-                        "{}: {:.1} min, {} rows, {} fixes",
-                        r.source.name(),
-                        r.duration_s / 60.0,
-                        r.rows,
-                        r.fixes.len()
-                    ));
-                }
-                (None, None) => {
-                    ui.label("No ride loaded: File > Open, or drop a CSV on the window");
-                }
-            }
-            if let Some(s) = &self.status {
-                ui.separator();
-                ui.label(s);
-            }
-        });
-        if let Some(e) = self.error.clone() {
-            ui.horizontal_wrapped(|ui| {
-                ui.colored_label(
-                    egui::Color32::from_rgb(255, 110, 110),
-                    format!("Error: {e}"),
-                );
-                if ui.small_button("Dismiss").clicked() {
-                    commands.push(Command::DismissError);
-                }
-            });
-        }
-    }
-
+impl GyropathApp {
+    /// The left panel: source, fit, settings, effects, view, parameters.
     fn controls_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
         if let Some(ride) = &self.ride {
             source::source_ui(ui, ride, commands);
             ui.separator();
         }
-        ui.heading("Fit");
-        ui.horizontal(|ui| {
-            let can = self.snapshot.is_some();
-            if self.running {
-                if ui.button("Pause").clicked() {
-                    commands.push(Command::Pause);
-                }
-            } else if ui.add_enabled(can, egui::Button::new("Run")).clicked() {
-                commands.push(Command::Run);
-            }
-            if ui
-                .add_enabled(can, egui::Button::new("Step once"))
-                .clicked()
-            {
-                commands.push(Command::Step);
-            }
-            if ui.add_enabled(can, egui::Button::new("Reset")).clicked() {
-                commands.push(Command::Reset);
-            }
-        });
-        ui.checkbox(&mut self.settings.auto_run, "run on load");
-        if let Some(s) = &self.snapshot {
-            let last = s.history.last();
-            let phase = match s.phase {
-                Phase::Step1 => "step 1 (constant bias, start, gain)",
-                Phase::Step2 => "step 2 (segment biases)",
-                Phase::Done => "done",
-            };
-            egui::Grid::new("fit-state").num_columns(2).show(ui, |ui| {
-                ui.label("phase");
-                ui.label(phase);
-                ui.end_row();
-                ui.label("iteration");
-                ui.label(format!("{}", last.map_or(0, |r| r.iteration)));
-                ui.end_row();
-                ui.label("cost");
-                ui.label(format!("{:.6e}", s.stats.cost));
-                ui.end_row();
-                ui.label("GPS RMS");
-                ui.label(format!("{:.3} m", s.stats.rms_horizontal_m));
-                ui.end_row();
-                ui.label("along / cross");
-                ui.label(format!(
-                    "{:.2} / {:.2} m",
-                    s.residual_rms.along_m, s.residual_rms.cross_m
-                ));
-                ui.end_row();
-                if let Some(up) = s.residual_rms.up_m {
-                    ui.label("vertical");
-                    ui.label(format!("{up:.2} m"));
-                    ui.end_row();
-                }
-                ui.label("segments");
-                ui.label(format!("{}", s.segments.len()));
-                ui.end_row();
-                ui.label("parameters");
-                ui.label(format!("{}", s.n_params));
-                ui.end_row();
-            });
-            if s.phase == Phase::Done && !s.violations.is_empty() {
-                let red = egui::Color32::from_rgb(210, 60, 60);
-                ui.colored_label(red, "Not physical: this fit is no result.");
-                for v in &s.violations {
-                    ui.colored_label(red, v);
-                }
-            }
-        }
-
+        self.fit_ui(ui, commands);
         ui.separator();
-        ui.heading("Settings");
-        let fit = &mut self.settings.fit;
-        let mut changed = false;
-        changed |= ui
-            .add(
-                egui::Slider::new(&mut fit.model.segment_s, 1.0..=120.0)
-                    .logarithmic(true)
-                    .text("segment (s)"),
-            )
-            .changed();
-        ui.horizontal(|ui| {
-            ui.label("step 2");
-            changed |= ui
-                .radio_value(&mut fit.method, Method::Lm, "Levenberg-Marquardt")
-                .changed();
-            changed |= ui
-                .radio_value(&mut fit.method, Method::Gd, "gradient descent")
-                .changed();
-        });
-        changed |= ui
-            .add(
-                egui::Slider::new(&mut fit.damping, 1e-9..=1e3)
-                    .logarithmic(true)
-                    .custom_formatter(|v, _| format!("{v:.1e}"))
-                    .text("LM damping λ"),
-            )
-            .changed();
-        changed |= ui
-            .add(
-                egui::Slider::new(&mut fit.step_size, 1e-10..=1e-2)
-                    .logarithmic(true)
-                    .custom_formatter(|v, _| format!("{v:.1e}"))
-                    .text("GD step size γ"),
-            )
-            .changed();
-        let mut prior = fit.model.bias_walk_dps_sqrt_s.is_some();
-        if ui
-            .checkbox(&mut prior, "bias smoothness prior")
-            .on_hover_text(
-                "a random-walk prior between neighbouring segment biases; off = the paper",
-            )
-            .changed()
-        {
-            fit.model.bias_walk_dps_sqrt_s = prior.then_some(DEFAULT_BIAS_WALK);
-            changed = true;
-        }
-        if let Some(w) = fit.model.bias_walk_dps_sqrt_s.as_mut() {
-            changed |= ui
-                .add(
-                    egui::Slider::new(w, 1e-4..=1e-1)
-                        .logarithmic(true)
-                        .text("bias walk (deg/s/sqrt(s))"),
-                )
-                .changed();
-        }
-
+        let settings = self.settings_ui(ui);
         ui.separator();
-        ui.heading("Effects");
-        ui.label("The paper's model is always on; add effects it lacks:");
-        let channels = self
-            .ride
-            .as_ref()
-            .map_or(Vec::new(), |r| r.channels.clone());
-        for (id, about) in effects::catalogue(&channels) {
-            let mut on = effects_contains(&fit.model.effects, &id);
-            if ui.checkbox(&mut on, &id).on_hover_text(about).changed() {
-                set_effect(&mut fit.model.effects, &id, on);
-                changed = true;
-            }
-        }
-        if changed {
+        let effects = self.effects_ui(ui);
+        if settings || effects {
             commands.push(Command::SettingsChanged);
         }
-
         ui.separator();
-        ui.heading("View");
-        ui.checkbox(
-            &mut self.settings.colour_by_residual,
-            "colour path by residual",
-        );
-
-        if let Some(s) = &self.snapshot {
-            ui.separator();
-            ui.heading("Parameters");
-            egui::Grid::new("params")
-                .num_columns(3)
-                .striped(true)
-                .show(ui, |ui| {
-                    for (effect, name, value, unit) in &s.params {
-                        ui.label(effect);
-                        ui.label(name);
-                        ui.label(format!("{value:.5} {unit}"));
-                        ui.end_row();
-                    }
-                });
-        }
-        if let Some(r) = &self.ride
-            && !r.warnings.is_empty()
-        {
-            ui.separator();
-            ui.heading("Warnings");
-            for w in &r.warnings {
-                ui.label(w);
-            }
-        }
-    }
-
-    fn history_ui(&mut self, ui: &mut egui::Ui) {
-        ui.heading("Model history");
-        if self.history.is_empty() {
-            ui.label(
-                "Each finished fit adds a row: change the model or settings and watch the error.",
-            );
-            return;
-        }
-        if self.history.iter().any(|r| r.heldout_rms_m.is_some()) {
-            plots::history_ui(ui, &self.history, 110.0);
-        }
-        egui::ScrollArea::vertical()
-            .id_salt("history-scroll")
-            .show(ui, |ui| {
-                egui::Grid::new("history")
-                    .num_columns(6)
-                    .striped(true)
-                    .show(ui, |ui| {
-                        for h in [
-                            "model",
-                            "segment",
-                            "params",
-                            "iters",
-                            "fit RMS",
-                            "held-out RMS",
-                        ] {
-                            ui.strong(h);
-                        }
-                        ui.end_row();
-                        for row in &self.history {
-                            ui.label(short_model(&row.model)).on_hover_text(&row.model);
-                            ui.label(format!("{:.1} s", row.segment_s));
-                            ui.label(format!("{}", row.params));
-                            ui.label(format!("{}", row.iterations));
-                            ui.label(format!("{:.3} m", row.fit_rms_m));
-                            match row.heldout_rms_m {
-                                Some(h) => ui.label(format!("{h:.3} m")),
-                                None => ui.label("validating..."),
-                            };
-                            ui.end_row();
-                        }
-                    });
-            });
-    }
-
-    fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
-        ui.horizontal(|ui| {
-            ui.heading("Diagnosis");
-            let idle = self.diagnosing.is_none() && self.snapshot.is_some();
-            if ui
-                .add_enabled(idle, egui::Button::new("Diagnose"))
-                .on_hover_text(
-                    "rank the effects the model lacks by how much each lowers the held-out error",
-                )
-                .clicked()
-            {
-                commands.push(Command::Diagnose);
-            }
-            if let Some(p) = &self.diagnosing {
-                ui.spinner();
-                ui.label(p);
-            }
-        });
-        let Some(d) = &self.diagnosis else {
-            ui.label("Diagnose ranks every effect the model lacks by the held-out error it saves.");
-            if self
-                .ride
-                .as_ref()
-                .is_some_and(|r| matches!(r.source, RideSource::Bytes { .. }))
-            {
-                ui.label(
-                    "This sample has nothing missing, so Diagnose finds nothing here: File > Examples has rides with something to find.",
-                );
-            }
-            return;
-        };
-        ui.label(format!(
-            "{}: fit {:.3} m, held-out {:.3} m",
-            short_model(&d.model.join(", ")),
-            d.fit_rms_m,
-            d.heldout_rms_m
-        ));
-        let current = self.snapshot.as_ref().map(|s| s.effects.clone());
-        let stale = current.as_ref().is_some_and(|c| *c != d.model);
-        if stale {
-            ui.label("(for an earlier model: diagnose again)");
-        }
-        if !d.not_physical.is_empty() {
-            let red = egui::Color32::from_rgb(210, 60, 60);
-            ui.colored_label(
-                red,
-                "The model's own fit is not physical: fix the axes or units first (Source panel).",
-            );
-            for v in &d.not_physical {
-                ui.colored_label(red, v);
-            }
-        }
-        egui::ScrollArea::vertical()
-            .id_salt("diagnosis-scroll")
-            .show(ui, |ui| {
-                egui::Grid::new("ranking")
-                    .num_columns(5)
-                    .striped(true)
-                    .show(ui, |ui| {
-                        for h in ["", "effect", "held-out (m)", "drop", "estimate"] {
-                            ui.strong(h);
-                        }
-                        ui.end_row();
-                        for c in &d.ranking {
-                            let present = current.as_ref().is_some_and(|m| m.contains(&c.effect));
-                            if ui
-                                .add_enabled(
-                                    !present && c.error.is_none(),
-                                    egui::Button::new("Add"),
-                                )
-                                .on_hover_text(format!("add {} and refit", c.effect))
-                                .clicked()
-                            {
-                                commands.push(Command::AddEffect(c.effect.clone()));
-                            }
-                            let label = if c.significant {
-                                egui::RichText::new(&c.effect)
-                                    .strong()
-                                    .color(egui::Color32::from_rgb(120, 220, 120))
-                            } else {
-                                egui::RichText::new(&c.effect)
-                            };
-                            ui.label(label).on_hover_text(&c.explanation);
-                            if let Some(e) = &c.error {
-                                ui.label("-");
-                                ui.label("-");
-                                ui.label(e);
-                            } else {
-                                ui.label(format!("{:.3}", c.heldout_rms_m));
-                                ui.label(format!(
-                                    "{:+.1} %{}",
-                                    100.0 * c.drop,
-                                    if c.significant { " significant" } else { "" }
-                                ));
-                                let est: Vec<String> = c
-                                    .estimate
-                                    .iter()
-                                    .map(|(k, e)| format!("{k} {:.3}±{:.3}", e.value, e.sigma))
-                                    .collect();
-                                ui.label(est.join(", ")).on_hover_text(&c.explanation);
-                            }
-                            ui.end_row();
-                        }
-                    });
-                if let Some(best) = d.ranking.first().filter(|c| c.significant) {
-                    ui.label(format!("Missing: {}: {}", best.effect, best.explanation));
-                } else {
-                    ui.label(
-                        "Nothing significant: no effect lowers the held-out error beyond chance.",
-                    );
-                }
-            });
-    }
-
-    fn plots_ui(&mut self, ui: &mut egui::Ui) {
-        let Some(ride) = &self.ride else {
-            ui.centered_and_justified(|ui| {
-                ui.label("Open a ride log (File > Open) or drop a CSV file here.");
-            });
-            return;
-        };
-        let snap = self.snapshot.as_ref();
-        let avail = ui.available_size();
-        let mut hover = None;
-        ui.horizontal_top(|ui| {
-            let map_w = (avail.x * 0.5).max(200.0);
-            ui.allocate_ui(egui::vec2(map_w, avail.y), |ui| {
-                plots::map_ui(
-                    ui,
-                    ride,
-                    snap,
-                    self.settings.colour_by_residual,
-                    self.hover_t,
-                );
-            });
-            ui.vertical(|ui| {
-                let Some(snap) = snap else {
-                    ui.label("Waiting for the first iteration...");
-                    return;
-                };
-                let h = ((avail.y - 3.0 * 24.0) / 3.0).max(60.0);
-                ui.label("Fit progress (log scale): GPS RMS over the whole ride; grey lines end a step, red ones mark a settings change");
-                plots::cost_ui(ui, snap, h);
-                ui.label("Gyro bias per segment");
-                hover = hover.or(plots::bias_ui(ui, ride, snap, h).0);
-                ui.label("Residuals at GPS fixes");
-                hover = hover.or(plots::residuals_ui(ui, ride, snap, h).0);
-            });
-        });
-        self.hover_t = hover;
+        self.view_ui(ui);
+        self.parameters_ui(ui);
     }
 }
 
@@ -900,20 +474,6 @@ fn short_model(model: &str) -> String {
     }
 }
 
-fn effects_contains(list: &[String], id: &str) -> bool {
-    list.iter().any(|e| e.split(',').any(|p| p.trim() == id))
-}
-
-fn set_effect(list: &mut Vec<String>, id: &str, on: bool) {
-    if on {
-        if !effects_contains(list, id) {
-            list.push(id.to_string());
-        }
-    } else {
-        list.retain(|e| e.trim() != id);
-    }
-}
-
 /// Open the app window on `ride` (the bundled sample when `None`).
 pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Result {
     let options = eframe::NativeOptions {
@@ -944,17 +504,6 @@ pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Res
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn effect_toggles_edit_the_list() {
-        let mut list = vec!["paper".to_string()];
-        set_effect(&mut list, "gyro_scale", true);
-        set_effect(&mut list, "gyro_scale", true);
-        assert_eq!(list, ["paper", "gyro_scale"]);
-        assert!(effects_contains(&list, "gyro_scale"));
-        set_effect(&mut list, "gyro_scale", false);
-        assert_eq!(list, ["paper"]);
-    }
 
     #[test]
     fn settings_round_trip_through_json_and_default_missing_fields() {

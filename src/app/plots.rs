@@ -389,6 +389,46 @@ fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
         .y_axis_formatter(tick_label)
 }
 
+impl super::GyropathApp {
+    pub(super) fn plots_ui(&mut self, ui: &mut egui::Ui) {
+        let Some(ride) = &self.ride else {
+            ui.centered_and_justified(|ui| {
+                ui.label("Open a ride log (File > Open) or drop a CSV file here.");
+            });
+            return;
+        };
+        let snap = self.snapshot.as_ref();
+        let avail = ui.available_size();
+        let mut hover = None;
+        ui.horizontal_top(|ui| {
+            let map_w = (avail.x * 0.5).max(200.0);
+            ui.allocate_ui(egui::vec2(map_w, avail.y), |ui| {
+                map_ui(
+                    ui,
+                    ride,
+                    snap,
+                    self.settings.colour_by_residual,
+                    self.hover_t,
+                );
+            });
+            ui.vertical(|ui| {
+                let Some(snap) = snap else {
+                    ui.label("Waiting for the first iteration...");
+                    return;
+                };
+                let h = ((avail.y - 3.0 * 24.0) / 3.0).max(60.0);
+                ui.label("Fit progress (log scale): GPS RMS over the whole ride; grey lines end a step, red ones mark a settings change");
+                cost_ui(ui, snap, h);
+                ui.label("Gyro bias per segment");
+                hover = hover.or(bias_ui(ui, ride, snap, h).0);
+                ui.label("Residuals at GPS fixes");
+                hover = hover.or(residuals_ui(ui, ride, snap, h).0);
+            });
+        });
+        self.hover_t = hover;
+    }
+}
+
 #[cfg(test)]
 mod grid_tests {
     use super::*;

@@ -1,0 +1,121 @@
+//! The diagnosis panel: the missing effects ranked by the held-out error
+//! they save, each with its estimate and an Add button.
+
+use super::worker::RideSource;
+use super::{Command, GyropathApp, short_model};
+
+impl GyropathApp {
+    pub(super) fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
+        ui.horizontal(|ui| {
+            ui.heading("Diagnosis");
+            let idle = self.diagnosing.is_none() && self.snapshot.is_some();
+            if ui
+                .add_enabled(idle, egui::Button::new("Diagnose"))
+                .on_hover_text(
+                    "rank the effects the model lacks by how much each lowers the held-out error",
+                )
+                .clicked()
+            {
+                commands.push(Command::Diagnose);
+            }
+            if let Some(p) = &self.diagnosing {
+                ui.spinner();
+                ui.label(p);
+            }
+        });
+        let Some(d) = &self.diagnosis else {
+            ui.label("Diagnose ranks every effect the model lacks by the held-out error it saves.");
+            if self
+                .ride
+                .as_ref()
+                .is_some_and(|r| matches!(r.source, RideSource::Bytes { .. }))
+            {
+                ui.label(
+                    "This sample has nothing missing, so Diagnose finds nothing here: File > Examples has rides with something to find.",
+                );
+            }
+            return;
+        };
+        ui.label(format!(
+            "{}: fit {:.3} m, held-out {:.3} m",
+            short_model(&d.model.join(", ")),
+            d.fit_rms_m,
+            d.heldout_rms_m
+        ));
+        let current = self.snapshot.as_ref().map(|s| s.effects.clone());
+        let stale = current.as_ref().is_some_and(|c| *c != d.model);
+        if stale {
+            ui.label("(for an earlier model: diagnose again)");
+        }
+        if !d.not_physical.is_empty() {
+            let red = egui::Color32::from_rgb(210, 60, 60);
+            ui.colored_label(
+                red,
+                "The model's own fit is not physical: fix the axes or units first (Source panel).",
+            );
+            for v in &d.not_physical {
+                ui.colored_label(red, v);
+            }
+        }
+        egui::ScrollArea::vertical()
+            .id_salt("diagnosis-scroll")
+            .show(ui, |ui| {
+                egui::Grid::new("ranking")
+                    .num_columns(5)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        for h in ["", "effect", "held-out (m)", "drop", "estimate"] {
+                            ui.strong(h);
+                        }
+                        ui.end_row();
+                        for c in &d.ranking {
+                            let present = current.as_ref().is_some_and(|m| m.contains(&c.effect));
+                            if ui
+                                .add_enabled(
+                                    !present && c.error.is_none(),
+                                    egui::Button::new("Add"),
+                                )
+                                .on_hover_text(format!("add {} and refit", c.effect))
+                                .clicked()
+                            {
+                                commands.push(Command::AddEffect(c.effect.clone()));
+                            }
+                            let label = if c.significant {
+                                egui::RichText::new(&c.effect)
+                                    .strong()
+                                    .color(egui::Color32::from_rgb(120, 220, 120))
+                            } else {
+                                egui::RichText::new(&c.effect)
+                            };
+                            ui.label(label).on_hover_text(&c.explanation);
+                            if let Some(e) = &c.error {
+                                ui.label("-");
+                                ui.label("-");
+                                ui.label(e);
+                            } else {
+                                ui.label(format!("{:.3}", c.heldout_rms_m));
+                                ui.label(format!(
+                                    "{:+.1} %{}",
+                                    100.0 * c.drop,
+                                    if c.significant { " significant" } else { "" }
+                                ));
+                                let est: Vec<String> = c
+                                    .estimate
+                                    .iter()
+                                    .map(|(k, e)| format!("{k} {:.3}±{:.3}", e.value, e.sigma))
+                                    .collect();
+                                ui.label(est.join(", ")).on_hover_text(&c.explanation);
+                            }
+                            ui.end_row();
+                        }
+                    });
+                if let Some(best) = d.ranking.first().filter(|c| c.significant) {
+                    ui.label(format!("Missing: {}: {}", best.effect, best.explanation));
+                } else {
+                    ui.label(
+                        "Nothing significant: no effect lowers the held-out error beyond chance.",
+                    );
+                }
+            });
+    }
+}

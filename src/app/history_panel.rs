@@ -1,0 +1,51 @@
+//! The model history panel: every finished fit with its fit and held-out
+//! error, charted so the error can be watched falling.
+
+use super::{GyropathApp, plots, short_model};
+
+impl GyropathApp {
+    pub(super) fn history_ui(&mut self, ui: &mut egui::Ui) {
+        ui.heading("Model history");
+        if self.history.is_empty() {
+            ui.label(
+                "Each finished fit adds a row: change the model or settings and watch the error.",
+            );
+            return;
+        }
+        if self.history.iter().any(|r| r.heldout_rms_m.is_some()) {
+            plots::history_ui(ui, &self.history, 110.0);
+        }
+        egui::ScrollArea::vertical()
+            .id_salt("history-scroll")
+            .show(ui, |ui| {
+                egui::Grid::new("history")
+                    .num_columns(6)
+                    .striped(true)
+                    .show(ui, |ui| {
+                        for h in [
+                            "model",
+                            "segment",
+                            "params",
+                            "iters",
+                            "fit RMS",
+                            "held-out RMS",
+                        ] {
+                            ui.strong(h);
+                        }
+                        ui.end_row();
+                        for row in &self.history {
+                            ui.label(short_model(&row.model)).on_hover_text(&row.model);
+                            ui.label(format!("{:.1} s", row.segment_s));
+                            ui.label(format!("{}", row.params));
+                            ui.label(format!("{}", row.iterations));
+                            ui.label(format!("{:.3} m", row.fit_rms_m));
+                            match row.heldout_rms_m {
+                                Some(h) => ui.label(format!("{h:.3} m")),
+                                None => ui.label("validating..."),
+                            };
+                            ui.end_row();
+                        }
+                    });
+            });
+    }
+}

@@ -1,0 +1,85 @@
+//! The menu bar (File: open, examples, recent, export) and files dropped on the window.
+
+use super::worker::{ExportKind, RideSource};
+use super::{Command, GyropathApp, examples, sample_ride};
+
+impl GyropathApp {
+    pub(super) fn dropped_files(&mut self, ui: &egui::Ui, commands: &mut Vec<Command>) {
+        let dropped = ui.ctx().input(|i| i.raw.dropped_files.clone());
+        if let Some(f) = dropped.into_iter().next() {
+            commands.push(Command::Open(RideSource::file(f.path().to_path_buf())));
+        }
+    }
+
+    pub(super) fn menu_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
+        egui::MenuBar::new().ui(ui, |ui| {
+            ui.menu_button("File", |ui| {
+                if ui.button("Open ride or bag...").clicked() {
+                    commands.push(Command::PickRide);
+                }
+                if ui.button("Open ROS 2 bag folder...").clicked() {
+                    commands.push(Command::PickBagFolder);
+                }
+                if ui.button("Open the sample ride").clicked() {
+                    commands.push(Command::Open(sample_ride()));
+                }
+                ui.menu_button("Examples", |ui| examples::examples_menu_ui(ui, commands));
+                ui.menu_button("Recent", |ui| {
+                    if self.settings.recent.is_empty() {
+                        ui.label("(none yet)");
+                    }
+                    for p in &self.settings.recent {
+                        if ui.button(p.display().to_string()).clicked() {
+                            commands.push(Command::Open(RideSource::file(p.clone())));
+                        }
+                    }
+                });
+                ui.separator();
+                let fitted = self.snapshot.is_some();
+                for (label, kind) in [
+                    ("Export path (CSV)...", ExportKind::PathCsv),
+                    ("Export path (GPX)...", ExportKind::PathGpx),
+                    ("Export fit report (JSON)...", ExportKind::ReportJson),
+                ] {
+                    if ui.add_enabled(fitted, egui::Button::new(label)).clicked() {
+                        commands.push(Command::PickExport(kind));
+                    }
+                }
+            });
+            ui.separator();
+            match (&self.loading, &self.ride) {
+                (Some(name), _) => {
+                    ui.spinner();
+                    ui.label(format!("Loading {name}..."));
+                }
+                (None, Some(r)) => {
+                    ui.label(format!(
+                        "{}: {:.1} min, {} rows, {} fixes",
+                        r.source.name(),
+                        r.duration_s / 60.0,
+                        r.rows,
+                        r.fixes.len()
+                    ));
+                }
+                (None, None) => {
+                    ui.label("No ride loaded: File > Open, or drop a CSV on the window");
+                }
+            }
+            if let Some(s) = &self.status {
+                ui.separator();
+                ui.label(s);
+            }
+        });
+        if let Some(e) = self.error.clone() {
+            ui.horizontal_wrapped(|ui| {
+                ui.colored_label(
+                    egui::Color32::from_rgb(255, 110, 110),
+                    format!("Error: {e}"),
+                );
+                if ui.small_button("Dismiss").clicked() {
+                    commands.push(Command::DismissError);
+                }
+            });
+        }
+    }
+}
