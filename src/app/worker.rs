@@ -17,7 +17,7 @@ use crate::diagnosis::{
 };
 use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
-use crate::model::Model;
+use crate::model::{Model, PathAt};
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
 use crate::signals::Signals;
 
@@ -512,27 +512,37 @@ fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
     }
 }
 
-/// Decimate the path to at most [`MAX_PATH_POINTS`] (always keeping the last row).
-fn decimated_path(model: &Model, p: &[nalgebra::Vector3<f64>]) -> Vec<[f64; 3]> {
-    let t = &model.signals.t;
-    let stride = p.len().div_ceil(MAX_PATH_POINTS).max(1);
-    let mut out: Vec<[f64; 3]> = (0..p.len())
-        .step_by(stride)
-        .map(|j| [t[j], p[j].x, p[j].y])
-        .collect();
-    if !(p.len() - 1).is_multiple_of(stride) {
-        let j = p.len() - 1;
-        out.push([t[j], p[j].x, p[j].y]);
+/// The rows of the path decimated to at most [`MAX_PATH_POINTS`] (always keeping the last row).
+fn decimated_rows(n: usize) -> Vec<usize> {
+    let stride = n.div_ceil(MAX_PATH_POINTS).max(1);
+    let mut rows: Vec<usize> = (0..n).step_by(stride).collect();
+    if n > 0 && !(n - 1).is_multiple_of(stride) {
+        rows.push(n - 1);
     }
-    out
+    rows
 }
 
 /// Everything the UI draws about the current state of `fit`.
 pub fn snapshot(fit: &Reconstruction) -> Snapshot {
     let model = fit.model();
     let theta = fit.params();
-    let traj = fit.trajectory();
-    let residuals = fix_residuals(model, theta, &traj);
+    // One sweep, keeping only the rows drawn and the rows the residuals read:
+    // never the whole trajectory (some 190 MB on a 6-hour ride, per snapshot).
+    let t = &model.signals.t;
+    let path_rows = decimated_rows(t.len());
+    let mut rows = model.residual_rows(theta);
+    rows.extend(&path_rows);
+    rows.sort_unstable();
+    rows.dedup();
+    let sparse = model.sparse_path(theta, rows);
+    let residuals = fix_residuals(model, theta, &sparse);
+    let path = path_rows
+        .iter()
+        .map(|&j| {
+            let p = sparse.p_at(j);
+            [t[j], p.x, p.y]
+        })
+        .collect();
     let mut params = Vec::new();
     for (e, effect) in model.effects().iter().enumerate() {
         if effect.segment_edges().is_some() {
@@ -556,7 +566,7 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
         phase: fit.phase(),
         history: fit.history().to_vec(),
         stats: fit.stats(),
-        path: decimated_path(model, &traj.p),
+        path,
         residual_rms: ResidualRms::of(&residuals),
         residuals,
         segments: segment_biases(model, theta),

@@ -15,7 +15,7 @@
 
 use nalgebra::Vector3;
 
-use crate::model::{Model, Trajectory};
+use crate::model::{Model, PathAt};
 
 /// The residual of one GPS fix.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -42,9 +42,10 @@ impl FixResidual {
 }
 
 /// Residuals of every GPS fix for parameters `theta` and their path `traj`
-/// (pass `model.trajectory(theta)`; it is taken to avoid a second sweep when the
-/// caller has it already).
-pub fn fix_residuals(model: &Model, theta: &[f64], traj: &Trajectory) -> Vec<FixResidual> {
+/// (pass `model.trajectory(theta)`, or `model.sparse_path(theta,
+/// model.residual_rows(theta))` where the full path is too big to hold; it is
+/// taken to avoid a second sweep when the caller has it already).
+pub fn fix_residuals(model: &Model, theta: &[f64], traj: &impl PathAt) -> Vec<FixResidual> {
     let sig = &model.signals;
     let misfit = model.misfits(theta, traj);
     let (axis, _) = model.forward_axis(theta);
@@ -63,7 +64,7 @@ pub fn fix_residuals(model: &Model, theta: &[f64], traj: &Trajectory) -> Vec<Fix
             }
             k += 1;
         }
-        let f = traj.q[fix.row] * axis;
+        let f = traj.q_at(fix.row) * axis;
         let h = Vector3::new(f.x, f.y, 0.0);
         let h = if h.norm() > 1e-9 {
             h.normalize()
@@ -73,7 +74,7 @@ pub fn fix_residuals(model: &Model, theta: &[f64], traj: &Trajectory) -> Vec<Fix
         let [e, n] = en;
         let j = fix.row.max(1);
         let speed = if sig.dt[j] > 0.0 {
-            traj.d[j] / sig.dt[j]
+            traj.d_at(j) / sig.dt[j]
         } else {
             0.0
         };
@@ -157,6 +158,28 @@ mod tests {
             let h2 = r.east.powi(2) + r.north.powi(2);
             assert!((r.along.powi(2) + r.cross.powi(2) - h2).abs() < 1e-9 * (1.0 + h2));
         }
+    }
+
+    /// A view's snapshot keeps only the rows it reads: the residuals (here with
+    /// a GPS lag, which interpolates between rows) are those of the full path.
+    #[test]
+    fn a_sparse_path_gives_the_full_paths_residuals() {
+        let sig = Arc::new(crate::testing::simulated_signals(4, 240.0, &["gps_lag"]));
+        let spec = ModelSpec {
+            effects: vec!["paper".into(), "gps_lag".into()],
+            ..ModelSpec::default()
+        };
+        let model = Model::new(sig, spec).expect("model");
+        let mut theta = model.initial_params();
+        let lag = model
+            .range(model.effect_index("gps_lag").expect("lag"))
+            .start;
+        theta[lag] = 0.63;
+        let full = fix_residuals(&model, &theta, &model.trajectory(&theta));
+        let rows = model.residual_rows(&theta);
+        assert!(rows.len() < model.signals.len() / 20, "{} rows", rows.len());
+        let sparse = fix_residuals(&model, &theta, &model.sparse_path(&theta, rows));
+        assert_eq!(full, sparse);
     }
 
     #[test]

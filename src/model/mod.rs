@@ -30,7 +30,7 @@ pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
 pub use start::{StartError, StartGuess};
-pub use sweep::{Evaluation, Trajectory};
+pub use sweep::{Evaluation, PathAt, SparsePath, Trajectory};
 
 use std::sync::Arc;
 

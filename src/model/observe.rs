@@ -127,17 +127,38 @@ impl ObsPlan {
 
 impl Model {
     /// `x_k - y_k` (m, model minus measurement) of every observation for a computed path.
-    pub(crate) fn misfits(&self, theta: &[f64], path: &super::Trajectory) -> Vec<f64> {
+    pub(crate) fn misfits(&self, theta: &[f64], path: &impl super::PathAt) -> Vec<f64> {
         let plan = self.obs_plan(theta);
         self.observations
             .iter()
             .enumerate()
             .map(|(k, o)| {
                 let j = plan.row[k];
-                let delta = path.p[j] - path.p[j.max(1) - 1];
-                plan.x(k, o.axis, &path.p[j], &delta) - plan.target[k]
+                let p = path.p_at(j);
+                let delta = p - path.p_at(j.max(1) - 1);
+                plan.x(k, o.axis, &p, &delta) - plan.target[k]
             })
             .collect()
+    }
+
+    /// The rows a residual evaluation reads at `theta` (each observation's
+    /// row and the one before it, and every fix's row), sorted, without repeats.
+    pub fn residual_rows(&self, theta: &[f64]) -> Vec<usize> {
+        let plan = self.obs_plan(theta);
+        let mut rows: Vec<usize> = plan
+            .row
+            .iter()
+            .flat_map(|&j| [j.max(1) - 1, j])
+            .chain(
+                self.signals
+                    .fixes
+                    .iter()
+                    .flat_map(|f| [f.row, f.row.max(1)]),
+            )
+            .collect();
+        rows.sort_unstable();
+        rows.dedup();
+        rows
     }
 
     /// The vehicle's forward axis in sensor axes and its partials `(parameter, d f / d p)`.

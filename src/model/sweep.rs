@@ -26,6 +26,72 @@ pub(crate) struct Forward {
     pub delta: Vec<Vector3<f64>>,
 }
 
+/// What evaluating residuals reads of a path: the attitude, the position and
+/// the step's distance at a row. A full [`Trajectory`] has every row; a
+/// [`SparsePath`] only those it was asked for.
+pub trait PathAt {
+    fn q_at(&self, j: usize) -> UnitQuaternion<f64>;
+    fn p_at(&self, j: usize) -> Vector3<f64>;
+    fn d_at(&self, j: usize) -> f64;
+}
+
+impl PathAt for Trajectory {
+    fn q_at(&self, j: usize) -> UnitQuaternion<f64> {
+        self.q[j]
+    }
+    fn p_at(&self, j: usize) -> Vector3<f64> {
+        self.p[j]
+    }
+    fn d_at(&self, j: usize) -> f64 {
+        self.d[j]
+    }
+}
+
+/// The path at chosen rows (see [`Model::sparse_path`]).
+#[derive(Clone, Debug, Default)]
+pub struct SparsePath {
+    rows: Vec<usize>,
+    q: Vec<UnitQuaternion<f64>>,
+    p: Vec<Vector3<f64>>,
+    d: Vec<f64>,
+}
+
+impl SparsePath {
+    /// The rows held, in order.
+    pub fn rows(&self) -> &[usize] {
+        &self.rows
+    }
+
+    /// Index of row `j`, which must be one of those asked for (else the
+    /// nearest held row, and a debug build stops).
+    fn index(&self, j: usize) -> usize {
+        match self.rows.binary_search(&j) {
+            Ok(i) => i,
+            Err(i) => {
+                debug_assert!(false, "row {j} was not asked of the sparse path");
+                i.min(self.rows.len().saturating_sub(1))
+            }
+        }
+    }
+
+    /// Position at the `i`-th held row.
+    pub fn p_of(&self, i: usize) -> Vector3<f64> {
+        self.p[i]
+    }
+}
+
+impl PathAt for SparsePath {
+    fn q_at(&self, j: usize) -> UnitQuaternion<f64> {
+        self.q[self.index(j)]
+    }
+    fn p_at(&self, j: usize) -> Vector3<f64> {
+        self.p[self.index(j)]
+    }
+    fn d_at(&self, j: usize) -> f64 {
+        self.d[self.index(j)]
+    }
+}
+
 /// The reconstructed path for one parameter vector.
 #[derive(Clone, Debug, Default)]
 pub struct Trajectory {
@@ -226,6 +292,42 @@ impl Model {
         self.sweep_from(theta, self.start_of_ride(theta), |j, q, p, _, _| {
             visit(j, q, p)
         });
+    }
+
+    /// The path at the given rows only (sorted, without repeats), from one
+    /// sweep: what a view needs of a long ride (its fixes, a decimated path)
+    /// without holding every row's attitude and position (a 6-hour ride's
+    /// full trajectory is some 190 MB).
+    pub fn sparse_path(&self, theta: &[f64], rows: Vec<usize>) -> SparsePath {
+        let mut out = SparsePath {
+            q: Vec::with_capacity(rows.len()),
+            p: Vec::with_capacity(rows.len()),
+            d: Vec::with_capacity(rows.len()),
+            rows,
+        };
+        let mut next = 0usize;
+        self.sweep_from(theta, self.start_of_ride(theta), |j, q, p, _, d| {
+            if out.rows.get(next) == Some(&j) {
+                out.q.push(*q);
+                out.p.push(*p);
+                out.d.push(d);
+                next += 1;
+            }
+        });
+        // Rows past the sweep's horizon (a window's) keep its last state.
+        while out.q.len() < out.rows.len() {
+            let (q, p) = (
+                out.q
+                    .last()
+                    .copied()
+                    .unwrap_or_else(UnitQuaternion::identity),
+                out.p.last().copied().unwrap_or_else(Vector3::zeros),
+            );
+            out.q.push(q);
+            out.p.push(p);
+            out.d.push(0.0);
+        }
+        out
     }
 
     /// The full path for `theta` (from row 0, also for a window).
