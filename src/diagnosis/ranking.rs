@@ -145,8 +145,7 @@ pub fn diagnose_fitted(
             .cmp(&b.error.is_some())
             .then(a.heldout_rms_m.total_cmp(&b.heldout_rms_m))
     });
-    let traj = model.trajectory(theta);
-    let residuals = fix_residuals(model, theta, &traj);
+    let residuals = fix_residuals(model, theta, &model.residual_path(theta));
     let not_physical: Vec<String> = super::limits::check(model, theta)
         .iter()
         .map(ToString::to_string)
@@ -406,8 +405,7 @@ fn explain(
             v("drift")
         ),
         "gps_outliers" => {
-            let traj = model.trajectory(theta);
-            let res = fix_residuals(model, theta, &traj);
+            let res = fix_residuals(model, theta, &model.residual_path(theta));
             let scale = model
                 .effects()
                 .iter()

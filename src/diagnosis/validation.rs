@@ -150,9 +150,11 @@ impl HeldOut {
 /// little noise but shows what only moves the path vertically (a pitched
 /// sensor mount, barometer drift); GPS altitude, metres noisy, is left out.
 pub fn fix_errors(model: &Model, theta: &[f64]) -> Vec<f64> {
-    let traj = model.trajectory(theta);
+    // Only the rows the residuals read: every fold of a long ride would
+    // otherwise hold a whole trajectory.
+    let path = model.residual_path(theta);
     let vertical = model.observes_baro();
-    super::fix_residuals(model, theta, &traj)
+    super::fix_residuals(model, theta, &path)
         .iter()
         .map(|r| match (vertical, r.up) {
             (true, Some(up)) => r.horizontal().hypot(up),
@@ -171,6 +173,9 @@ pub fn validation_settings(settings: &FitSettings) -> FitSettings {
         ..settings.clone()
     }
 }
+
+/// Rides with more rows than this are validated one fold at a time.
+const SEQUENTIAL_FOLDS_ROWS: usize = 1_000_000;
 
 /// What the refit of one fold predicts.
 struct FoldResult {
@@ -196,23 +201,32 @@ pub fn held_out(
     let last = folds.block(t0 + sig.duration(), t0);
     let fold_at = |t: f64| folds.fold_of_block(folds.block(t, t0), last);
     let fold_of: Vec<Option<usize>> = sig.fixes.iter().map(|f| fold_at(f.t)).collect();
-    let results: Vec<Result<FoldResult, FitError>> = (0..folds.k)
-        .into_par_iter()
-        .filter(|&f| fold_of.contains(&Some(f)))
-        .map(|f| {
-            let train =
-                model.withholding(|t| fold_at(t) != Some(f) && !folds.guarded(t, t0, last, f))?;
-            let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
-            fit.finish();
-            let iterations = fit.history().len();
-            Ok(FoldResult {
-                fold: f,
-                errors: fix_errors(model, fit.params()),
-                iterations,
-                params: fit.params().to_vec(),
+    let refit_all = || -> Vec<Result<FoldResult, FitError>> {
+        (0..folds.k)
+            .into_par_iter()
+            .filter(|&f| fold_of.contains(&Some(f)))
+            .map(|f| {
+                let train = model
+                    .withholding(|t| fold_at(t) != Some(f) && !folds.guarded(t, t0, last, f))?;
+                let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
+                fit.finish();
+                let iterations = fit.history().len();
+                Ok(FoldResult {
+                    fold: f,
+                    errors: fix_errors(model, fit.params()),
+                    iterations,
+                    params: fit.params().to_vec(),
+                })
             })
-        })
-        .collect();
+            .collect()
+    };
+    // A fold's refit of a long ride holds its own sweep and LM workspace
+    // (about 125 MB for 6 hours): on rides this long the folds run one at a
+    // time, so that memory is bounded by one refit, not by the core count.
+    let results = match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
+        Ok(pool) if sig.len() > SEQUENTIAL_FOLDS_ROWS => pool.install(refit_all),
+        _ => refit_all(),
+    };
     let mut errors = vec![f64::NAN; sig.fixes.len()];
     let mut iterations = 0;
     let mut fold_params = Vec::new();

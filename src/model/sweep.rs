@@ -330,6 +330,11 @@ impl Model {
         out
     }
 
+    /// The path at the rows that residuals read ([`Model::residual_rows`]).
+    pub fn residual_path(&self, theta: &[f64]) -> SparsePath {
+        self.sparse_path(theta, self.residual_rows(theta))
+    }
+
     /// The full path for `theta` (from row 0, also for a window).
     pub fn trajectory(&self, theta: &[f64]) -> Trajectory {
         let n = self.horizon();
