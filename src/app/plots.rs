@@ -544,7 +544,9 @@ pub fn decimate(points: &[[f64; 2]], lo: f64, hi: f64, pixels: usize) -> Vec<[f6
     let first = points.partition_point(|p| p[0] < lo).saturating_sub(1);
     let last = (points.partition_point(|p| p[0] <= hi) + 1).min(points.len());
     let visible = &points[first.min(last)..last];
-    if visible.len() <= 2 * pixels.max(1) || !(hi > lo) {
+    if visible.len() <= 2 * pixels.max(1)
+        || hi.partial_cmp(&lo) != Some(std::cmp::Ordering::Greater)
+    {
         return visible.to_vec();
     }
     let width = (hi - lo) / pixels as f64;
