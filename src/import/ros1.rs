@@ -335,10 +335,12 @@ impl<'a> Fields<'a> {
     }
 }
 
-/// Writes ROS 1 bags (uncompressed chunks or bare messages), for tests and benchmarks.
+/// Writes ROS 1 bags (bare messages, or chunks: none, bz2 or lz4), for tests and benchmarks.
 pub struct BagWriter {
     pub bytes: Vec<u8>,
     connections: Vec<(String, String)>,
+    /// Chunked: the compression and the records of the open chunk.
+    chunk: Option<(&'static str, Vec<u8>)>,
 }
 
 impl Default for BagWriter {
@@ -360,6 +362,56 @@ impl BagWriter {
         Self {
             bytes,
             connections: Vec::new(),
+            chunk: None,
+        }
+    }
+
+    /// A writer that packs its records into chunks compressed with
+    /// `compression` ("none", "bz2" or "lz4"), as `rosbag record` does.
+    pub fn chunked(compression: &'static str) -> Self {
+        Self {
+            chunk: Some((compression, Vec::new())),
+            ..Self::new()
+        }
+    }
+
+    /// Close the open chunk (a chunked writer's records are in `bytes` only after this).
+    pub fn flush_chunk(&mut self) -> std::io::Result<()> {
+        let Some((compression, records)) = self.chunk.as_mut() else {
+            return Ok(());
+        };
+        if records.is_empty() {
+            return Ok(());
+        }
+        let raw = std::mem::take(records);
+        let data = match *compression {
+            "bz2" => {
+                use std::io::Write as _;
+                let mut e = bzip2::write::BzEncoder::new(Vec::new(), bzip2::Compression::default());
+                e.write_all(&raw)?;
+                e.finish()?
+            }
+            "lz4" => {
+                use std::io::Write as _;
+                let mut e = lz4_flex::frame::FrameEncoder::new(Vec::new());
+                e.write_all(&raw)?;
+                e.finish().map_err(std::io::Error::other)?
+            }
+            _ => raw.clone(),
+        };
+        let mut header = Vec::new();
+        push_field(&mut header, b"op", &[OP_CHUNK]);
+        push_field(&mut header, b"compression", compression.as_bytes());
+        push_field(&mut header, b"size", &(raw.len() as u32).to_le_bytes());
+        push_record(&mut self.bytes, &header, &data);
+        Ok(())
+    }
+
+    /// Where the next record goes: the open chunk, or the bag itself.
+    fn records(&mut self) -> &mut Vec<u8> {
+        match self.chunk.as_mut() {
+            Some((_, records)) => records,
+            None => &mut self.bytes,
         }
     }
 
@@ -378,7 +430,7 @@ impl BagWriter {
                 push_field(&mut body, b"topic", topic.as_bytes());
                 push_field(&mut body, b"type", type_name.as_bytes());
                 push_field(&mut body, b"md5sum", b"*");
-                push_record(&mut self.bytes, &header, &body);
+                push_record(self.records(), &header, &body);
                 id
             }
         };
@@ -389,7 +441,7 @@ impl BagWriter {
         let mut t = (sec as u32).to_le_bytes().to_vec();
         t.extend((((time - sec) * 1e9) as u32).to_le_bytes());
         push_field(&mut header, b"time", &t);
-        push_record(&mut self.bytes, &header, data);
+        push_record(self.records(), &header, data);
     }
 }
 
