@@ -316,14 +316,7 @@ pub fn load_signals(path: &Path, source: &SourceArgs, quiet: bool) -> Result<Sig
     if !quiet {
         describe_source(&imported);
     }
-    let warnings = imported.warnings();
-    let mut signals = Signals::from_owned_log(imported.log)?;
-    signals.warnings = warnings
-        .into_iter()
-        .chain(signals.warnings.into_iter().filter(|w| !w.is_empty()))
-        .collect();
-    signals.warnings.dedup();
-    Ok(signals)
+    Ok(imported.into_signals()?)
 }
 
 /// One or two lines on stderr: what was read, from which topics, mounted how.

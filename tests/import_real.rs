@@ -122,6 +122,22 @@ fn a_hand_mounting_and_as_logged_are_honoured_and_a_mismatch_is_warned() {
             .any(|w| w.contains("mounting: the data say 'x=-z,y=-x,z=y'")),
         "{w:?}"
     );
+    // The reader's own warning is said once, beside the checks' warnings.
+    let signals = open(husky().join("test1.bag"), MountChoice::AsLogged)
+        .into_signals()
+        .unwrap();
+    let fix_note = signals
+        .warnings
+        .iter()
+        .filter(|w| w.contains("GPS fix(es) before"))
+        .count();
+    assert_eq!(fix_note, 1, "{:?}", signals.warnings);
+    assert!(
+        signals
+            .warnings
+            .iter()
+            .any(|w| w.starts_with("mounting: the data say"))
+    );
     let by_hand = open(
         husky().join("test1.bag"),
         MountChoice::Fixed("x=-z,y=-x,z=y".parse().unwrap()),

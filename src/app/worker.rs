@@ -317,10 +317,7 @@ impl Worker {
         };
         let (signals, origin) = match imported.map_err(|e| e.to_string()).and_then(|im| {
             let origin = Origin::of(&im);
-            let warnings = im.warnings();
-            let mut s = Signals::from_owned_log(im.log).map_err(|e| e.to_string())?;
-            s.warnings = warnings.into_iter().chain(s.warnings).collect();
-            s.warnings.dedup();
+            let s = im.into_signals().map_err(|e| e.to_string())?;
             Ok((s, origin))
         }) {
             Ok((s, o)) => (Arc::new(s), o),

@@ -10,10 +10,10 @@
 //! outside 0.7-1.3 is reported as failed (`diagnosis::limits`).
 
 use super::{Columns, DistancePartials, Effect, ParamInfo, PriorRows};
+use crate::model::StartGuess;
 
 /// Prior standard deviation of the gain about 1.
 const GAIN_PRIOR_SIGMA: f64 = 0.1;
-use crate::model::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct OdometerGain;

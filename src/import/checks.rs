@@ -31,6 +31,7 @@
 use serde::Serialize;
 
 use super::{Mount, RideLog};
+use crate::diagnosis::structure::pearson;
 use crate::geodesy::{Geodetic, LocalFrame};
 
 /// How much a verdict matters.
@@ -600,26 +601,6 @@ fn gyro_units(beta: f64, vertical: AxisFinding, report: &mut CheckReport) {
     }
 }
 
-/// Pearson correlation.
-fn corr(x: &[f64], y: &[f64]) -> f64 {
-    let n = x.len() as f64;
-    if x.len() < 3 {
-        return 0.0;
-    }
-    let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-    for i in 0..x.len() {
-        sxy += (x[i] - mx) * (y[i] - my);
-        sxx += (x[i] - mx).powi(2);
-        syy += (y[i] - my).powi(2);
-    }
-    if sxx <= 0.0 || syy <= 0.0 {
-        0.0
-    } else {
-        sxy / (sxx * syy).sqrt()
-    }
-}
-
 /// Forward from the accelerometer against dv/dt and v * yaw rate.
 fn forward_axis(fixes: &[AtFix], up: AxisFinding, report: &mut CheckReport) -> Option<AxisFinding> {
     if fixes.iter().all(|f| f.acc.is_none()) {
@@ -665,8 +646,8 @@ fn forward_axis(fixes: &[AtFix], up: AxisFinding, report: &mut CheckReport) -> O
             let Some(m) = Mount::from_forward_up((f, sf), (up.axis, up.sign)) else {
                 continue;
             };
-            let r_fwd = sf * corr(&acc[f], &dvdt);
-            let r_lat = m.sign[1] * corr(&acc_lat[m.axis[1]], &centripetal);
+            let r_fwd = sf * pearson(&acc[f], &dvdt).unwrap_or(0.0);
+            let r_lat = m.sign[1] * pearson(&acc_lat[m.axis[1]], &centripetal).unwrap_or(0.0);
             let score = r_fwd + r_lat;
             if best.is_none_or(|b| score > b.0) {
                 best = Some((score, f, sf, r_fwd, r_lat));

@@ -240,6 +240,16 @@ impl Imported {
         w.extend(self.check.warnings(self.mount.as_ref()));
         w
     }
+
+    /// The signals of the imported log, consuming it, with the checks'
+    /// warnings after those of the reader and the derivation (the signals
+    /// already carry the log's own warnings: they are not added twice).
+    pub fn into_signals(self) -> Result<crate::signals::Signals, crate::signals::SignalError> {
+        let checks = self.check.warnings(self.mount.as_ref());
+        let mut signals = crate::signals::Signals::from_owned_log(self.log)?;
+        signals.warnings.extend(checks);
+        Ok(signals)
+    }
 }
 
 /// Tell the kind of `path` by its content, then its name.
