@@ -49,10 +49,14 @@ pub struct Topics {
 impl Topics {
     /// The candidates for a role: `imu`, `odom` or `fix`.
     pub fn candidates(&self, role: Role) -> Vec<&TopicInfo> {
-        self.all
-            .iter()
-            .filter(|t| t.kind.is_some_and(|k| role.accepts(k)))
-            .collect()
+        self.all.iter().filter(|t| t.serves(role)).collect()
+    }
+}
+
+impl TopicInfo {
+    /// Whether its messages can be read for `role`.
+    pub fn serves(&self, role: Role) -> bool {
+        self.kind.is_some_and(|k| role.accepts(k))
     }
 }
 
@@ -231,11 +235,8 @@ impl Recording {
     /// Choose the topic for each role: the one asked for, else the only one of its type.
     pub fn choose(&self, choice: &TopicChoice) -> Result<Topics, LoadError> {
         let pick = |role: Role| -> Result<String, LoadError> {
-            let candidates: Vec<&TopicInfo> = self
-                .topics
-                .iter()
-                .filter(|t| t.kind.is_some_and(|k| role.accepts(k)))
-                .collect();
+            let candidates: Vec<&TopicInfo> =
+                self.topics.iter().filter(|t| t.serves(role)).collect();
             let list = |ts: &[&TopicInfo]| {
                 ts.iter()
                     .map(|t| format!("{} ({}, {} messages)", t.name, t.type_name, t.messages))
@@ -261,7 +262,7 @@ impl Recording {
                     ),
                 };
                 return match self.topics.iter().find(|t| t.name == asked) {
-                    Some(t) if t.kind.is_some_and(|k| role.accepts(k)) => Ok(asked.to_string()),
+                    Some(t) if t.serves(role) => Ok(asked.to_string()),
                     Some(t) => Err(topic_err(format!(
                         "is {}, not the role asked for",
                         t.type_name
