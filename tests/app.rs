@@ -323,7 +323,7 @@ fn an_unphysical_fit_is_shown_as_no_result() {
     h.get_by_label("auto (from the data)").click();
     assert!(
         step_until(&mut h, Duration::from_secs(120), |a| {
-            a.ride.as_ref().is_some_and(|r| r.planar)
+            a.ride.as_ref().is_some_and(|r| r.attitude.is_planar())
                 && a.snapshot
                     .as_ref()
                     .is_some_and(|s| s.phase == gyropath::optimisation::Phase::Done)

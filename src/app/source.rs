@@ -21,7 +21,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         ride.fixes.len()
     ));
     let RideSource::Path(path, options) = &ride.source else {
-        ui.label(format!("attitude: {}", ride.attitude));
+        ui.label(format!("attitude: {}", ride.attitude.describe()));
         checks_ui(ui, ride);
         return;
     };
@@ -92,7 +92,11 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         let current = options.attitude.clone().unwrap_or_else(|| "auto".into());
         let mut picked = current.clone();
         egui::ComboBox::from_id_salt("attitude")
-            .selected_text(if ride.planar { "planar" } else { "3D" })
+            .selected_text(if ride.attitude.is_planar() {
+                "planar"
+            } else {
+                "3D"
+            })
             .show_ui(ui, |ui| {
                 ui.selectable_value(&mut picked, "auto".to_string(), "auto (from the data)");
                 ui.selectable_value(&mut picked, "3d".to_string(), "3D");
@@ -105,8 +109,8 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         }
     })
     .response
-    .on_hover_text(&ride.attitude);
-    ui.small(&ride.attitude);
+    .on_hover_text(ride.attitude.describe());
+    ui.small(ride.attitude.describe());
     checks_ui(ui, ride);
 }
 

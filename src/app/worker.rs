@@ -89,9 +89,8 @@ pub struct RideView {
     pub warnings: Vec<String>,
     /// What the ride was read from, and what the checks said.
     pub origin: Origin,
-    /// The attitude model and why (see [`crate::signals::Attitude`]).
-    pub attitude: String,
-    pub planar: bool,
+    /// The attitude model and why.
+    pub attitude: crate::signals::Attitude,
 }
 
 /// Where a ride came from: its kind, the topics read (bags), the mounting
@@ -327,9 +326,9 @@ impl Worker {
             }
         };
         self.running = false;
-        let mut view = ride_view(&source, &signals);
-        view.origin = origin;
-        self.send(Update::Loaded(Box::new(view)));
+        self.send(Update::Loaded(Box::new(ride_view(
+            &source, &signals, origin,
+        ))));
         self.ride = Some(LoadedRide {
             source,
             signals,
@@ -482,7 +481,7 @@ impl Worker {
     }
 }
 
-fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
+fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
     let fixes: Vec<[f64; 3]> = sig.fixes.iter().map(|f| [f.t, f.en[0], f.en[1]]).collect();
     let mut outages = Vec::new();
     let t_first = sig.t[0];
@@ -503,9 +502,8 @@ fn ride_view(source: &RideSource, sig: &Signals) -> RideView {
         outages,
         channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
         warnings: sig.warnings.clone(),
-        origin: Origin::default(),
-        attitude: sig.attitude.describe(),
-        planar: sig.attitude.is_planar(),
+        origin,
+        attitude: sig.attitude.clone(),
     }
 }
 
