@@ -1,7 +1,8 @@
 //! The analytic gradient in O(N): one forward sweep, one backward sweep.
 //!
 //! This is the paper's eq. 12-20 written as suffix sums. With
-//! `g_k = d C / d p_{i_k}` (the weighted residuals of GPS row `k`, times 2):
+//! `g_k = d C / d p_{i_k}` (`2 r dr / dx` summed over the residuals that see
+//! fix `k`: its own and, with correlated GPS errors, the next fix's whitened one):
 //!
 //! ```text
 //! A_j = sum_{i_k >= j} g_k                 d C / d Delta_j (every later fix moves with step j)
@@ -24,6 +25,7 @@
 use nalgebra::Vector3;
 
 use super::Model;
+use super::observe::Whitener;
 use super::rotation::left_jacobian;
 
 impl Model {
@@ -58,22 +60,33 @@ impl Model {
         let mut g_rate = vec![Vector3::zeros(); n];
         let mut g_dist = vec![0.0; n];
 
+        // d C / d x_k of every observation: 2 r_k on its own x and, through a
+        // whitened residual, on the previous fix's x too (see `noise`).
+        let values = Whitener::new(&plan, obs).all(
+            (0..obs.len()).map(|k| plan.x(k, obs[k].axis, &path.p[k], &path.delta[k])),
+        );
+        let mut g_x = vec![0.0; obs.len()];
+        for (k, v) in values.iter().enumerate() {
+            cost += v.r * v.r;
+            g_x[k] += 2.0 * v.r * v.slope;
+            if let Some(j) = plan.links[k].prev {
+                g_x[j] += 2.0 * v.r * v.back;
+            }
+        }
+
         // Add the residual gradient of every observation evaluated in step `row`:
         // x = p_row - beta Delta_row = (1 - beta) p_row + beta p_{row-1}.
         let take_row = |row: usize,
                         a: &mut Vector3<f64>,
                         pending: &mut Vector3<f64>,
                         k: &mut usize,
-                        cost: &mut f64,
                         grad: &mut [f64]| {
             *a += std::mem::take(pending);
             while *k > 0 && plan.row[*k - 1] == row {
                 *k -= 1;
                 let o = &obs[*k];
                 let delta = path.delta[*k];
-                let v = plan.value(*k, o, plan.x(*k, o.axis, &path.p[*k], &delta));
-                *cost += v.r * v.r;
-                let g = 2.0 * v.r * v.slope;
+                let g = g_x[*k];
                 let beta = plan.beta[*k];
                 a[o.axis] += g * (1.0 - beta);
                 pending[o.axis] += g * beta;
@@ -93,7 +106,7 @@ impl Model {
                 let j = from + i;
                 if pending != Vector3::zeros() || (k > 0 && plan.row[k - 1] == j) {
                     let mut add = Vector3::zeros();
-                    take_row(j, &mut add, &mut pending, &mut k, &mut cost, &mut grad);
+                    take_row(j, &mut add, &mut pending, &mut k, &mut grad);
                     a_rel += to_chunk * add;
                 }
                 let th = rates[j] * sig.dt[j];
@@ -116,7 +129,7 @@ impl Model {
             a = qa * a_rel;
             b = qa * b_rel;
         }
-        take_row(0, &mut a, &mut pending, &mut k, &mut cost, &mut grad);
+        take_row(0, &mut a, &mut pending, &mut k, &mut grad);
         for (i, &e) in self.gyro_chain.iter().enumerate().rev() {
             let r = self.range(e);
             self.effects[e].gyro_backward(

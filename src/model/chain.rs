@@ -88,6 +88,10 @@ struct Work {
     /// Rows waiting to be folded in.
     pending: Vec<Vec<f64>>,
     origin: Vector3<f64>,
+    /// Rows `d x_o` (no right-hand side) of observations that a later,
+    /// whitened residual also depends on: kept in the current unknowns through
+    /// every change of variables until that residual is added.
+    shadows: Vec<(usize, Vec<f64>)>,
 }
 
 impl Work {
@@ -147,10 +151,13 @@ impl Work {
         new.columns_mut(at + m, n_old - at)
             .copy_from(&old.columns(at, n_old - at));
         self.rows = new;
+        for (_, row) in &mut self.shadows {
+            row.splice(at..at, std::iter::repeat_n(0.0, m));
+        }
         self.open.push((b, m));
     }
 
-    /// `col(dst) += factor * col(src)` over all rows.
+    /// `col(dst) += factor * col(src)` over all rows (and the shadows).
     fn axpy_col(&mut self, dst: usize, src: usize, factor: f64) {
         if factor == 0.0 {
             return;
@@ -158,6 +165,22 @@ impl Work {
         for i in 0..self.rows.nrows() {
             let v = self.rows[(i, src)];
             self.rows[(i, dst)] += factor * v;
+        }
+        for (_, row) in &mut self.shadows {
+            row[dst] += factor * row[src];
+        }
+    }
+
+    /// Whether the first open block can be eliminated: finished (`s` has taken
+    /// it in), not the newest (the prior linking it to the next is in), and
+    /// no residual still to come depends on it through a shadow.
+    fn first_done(&self, completed: usize) -> bool {
+        match self.open.first() {
+            Some(&(b, m)) if self.open.len() > 1 && b < completed => self
+                .shadows
+                .iter()
+                .all(|(_, row)| row[..m].iter().all(|&v| v == 0.0)),
+            _ => false,
         }
     }
 
@@ -168,6 +191,9 @@ impl Work {
         let n = self.rows.ncols() - 1;
         let kept = self.rows.rows(0, m).into_owned();
         self.rows = self.rows.view((m, m), (n - m, n - m + 1)).into_owned();
+        for (_, row) in &mut self.shadows {
+            row.drain(..m);
+        }
         Op::Eliminate {
             block,
             rows: kept,
@@ -243,30 +269,69 @@ impl ChainSystem {
                 block_of[pos[i]] = b;
             }
         }
-        // diag(J^T J): globals and explicit rows, then the rows after each block
-        // from suffix moments of h h^T, then the priors.
+        // diag(J^T J). A residual row is `slope_o dx_o + back_o dx_prev`; for a
+        // block complete before both observations that is `htilde_o . y_c`
+        // with `htilde_o = slope_o h_o + back_o h_prev` (suffix moments below);
+        // the rows inside a block, or straddling its end, are explicit.
         let mut diag = vec![0.0; nf];
         let no = lin.r.len();
+        let prev_of = |o: usize| lin.prev[o].filter(|_| lin.slope[o].1 != 0.0);
         for (g, &i) in lin.globals.iter().enumerate() {
-            diag[pos[i]] = lin.jg.column(g).norm_squared();
+            diag[pos[i]] = (0..no)
+                .map(|o| {
+                    let (m, n) = lin.slope[o];
+                    m * lin.jg[(o, g)] + prev_of(o).map_or(0.0, |j| n * lin.jg[(j, g)])
+                })
+                .map(|v| v * v)
+                .sum();
         }
-        for &(b, vals) in &lin.jb {
-            if b != u32::MAX {
-                for (x, &i) in lin.blocks[b as usize].params.iter().enumerate() {
-                    diag[pos[i]] += vals[x] * vals[x];
+        for o in 0..no {
+            let (m, n) = lin.slope[o];
+            let row = lin.rows[o];
+            let (prev, prev_row) = match prev_of(o) {
+                Some(j) => (Some(j), lin.rows[j]),
+                None => (None, row),
+            };
+            // Blocks that end at or after the earlier observation and start by this one.
+            let from = lin.blocks.partition_point(|b| b.last < prev_row);
+            for b in from..lin.blocks.len() {
+                let block = &lin.blocks[b];
+                if block.first > row {
+                    break;
+                }
+                for (x, &i) in block.params.iter().enumerate() {
+                    let own = if row <= block.last {
+                        if lin.jb[o].0 == b as u32 { m * lin.jb[o].1[x] } else { 0.0 }
+                    } else {
+                        m * lin.h[o].dot(&lin.y[b][x])
+                    };
+                    let earlier = match prev {
+                        Some(j) if lin.jb[j].0 == b as u32 => n * lin.jb[j].1[x],
+                        _ => 0.0,
+                    };
+                    diag[pos[i]] += (own + earlier).powi(2);
                 }
             }
         }
-        let mut o = no;
+        let htilde: Vec<V9> = (0..no)
+            .map(|o| {
+                let (m, n) = lin.slope[o];
+                lin.h[o] * m + prev_of(o).map_or(V9::zeros(), |j| lin.h[j] * n)
+            })
+            .collect();
+        let key = |o: usize| prev_of(o).map_or(lin.rows[o], |j| lin.rows[j]);
+        let mut by_key: Vec<usize> = (0..no).collect();
+        by_key.sort_by_key(|&o| std::cmp::Reverse(key(o)));
+        let mut next = 0;
         let mut moments = nalgebra::SMatrix::<f64, 9, 9>::zeros();
         for (b, block) in lin.blocks.iter().enumerate().rev() {
             if block.last == usize::MAX {
                 continue;
             }
-            let after = lin.rows.partition_point(|&row| row <= block.last);
-            while o > after {
-                o -= 1;
-                moments += lin.h[o] * lin.h[o].transpose();
+            while next < no && key(by_key[next]) > block.last {
+                let hv = htilde[by_key[next]];
+                moments += hv * hv.transpose();
+                next += 1;
             }
             for (x, &i) in block.params.iter().enumerate() {
                 diag[pos[i]] += lin.y[b][x].dot(&(moments * lin.y[b][x]));
@@ -336,7 +401,17 @@ impl ChainSystem {
             rows: DMatrix::zeros(0, 7 + ng),
             pending: Vec::new(),
             origin: Vector3::zeros(),
+            shadows: Vec::new(),
         };
+        // Observations a later whitened residual depends on.
+        let mut needed = vec![false; lin.r.len()];
+        for (o, p) in lin.prev.iter().enumerate() {
+            if let Some(j) = *p
+                && lin.slope[o].1 != 0.0
+            {
+                needed[j] = true;
+            }
+        }
         let mut ops: Vec<Op> = Vec::new();
         // s = 0 exactly, and the globals' damping and priors.
         for k in 0..6 {
@@ -355,7 +430,7 @@ impl ChainSystem {
         let nb = blocks.len();
         let mut next_open = 0;
         let mut next_complete = 0;
-        let open = |work: &mut Work, ops: &mut Vec<Op>, b: usize| {
+        let open = |work: &mut Work, b: usize| {
             let m = blocks[b].params.len();
             work.open_block(b, m);
             let c0 = work.col_of(b).unwrap_or(0);
@@ -365,7 +440,9 @@ impl ChainSystem {
                 work.pending.push(row);
             }
             self.add_priors(work, b + 1, &scale);
-            if work.open.len() > 1 {
+        };
+        let eliminate = |work: &mut Work, ops: &mut Vec<Op>, completed: usize| {
+            while work.first_done(completed) {
                 ops.push(work.eliminate_first());
             }
         };
@@ -401,8 +478,9 @@ impl ChainSystem {
                     next_complete += 1;
                 }
                 if next_open < nb && blocks[next_open].first <= row {
-                    open(&mut work, &mut ops, next_open);
+                    open(&mut work, next_open);
                     next_open += 1;
+                    eliminate(&mut work, &mut ops, next_complete);
                     continue;
                 }
                 break;
@@ -422,22 +500,22 @@ impl ChainSystem {
                 work.origin = p;
                 ops.push(Op::Shift(dc));
             }
+            // The row of d x_o in the current unknowns: (U x (p - c) + T)_a,
+            // its block's explicit entries and the globals.
             let n = work.n();
             let mut r = vec![0.0; n + 1];
             let h = &lin.h[o];
-            // h = w (x x e_a, -e_a, e_a): recover w and the axis from the last three entries.
-            let axis = (0..3).find(|&a| h[6 + a] != 0.0);
-            if let Some(a) = axis {
-                let w = h[6 + a];
+            // h = (x x e_a, -e_a, e_a): the axis is where the last three entries are non-zero.
+            if let Some(a) = (0..3).find(|&a| h[6 + a] != 0.0) {
                 let rel = p - work.origin;
                 let mut e = Vector3::zeros();
                 e[a] = 1.0;
-                let ru = rel.cross(&e) * w;
+                let ru = rel.cross(&e);
                 let s0 = work.s0();
                 for k in 0..3 {
                     r[s0 + k] = ru[k];
                 }
-                r[s0 + 3 + a] = w;
+                r[s0 + 3 + a] = 1.0;
             }
             let (b, vals) = lin.jb[o];
             if b != u32::MAX
@@ -451,6 +529,23 @@ impl ChainSystem {
             for (g, &c) in global_col.iter().enumerate() {
                 r[g0 + g] = lin.jg[(o, g)] / scale[c];
             }
+            // The residual's row: slope_o dx_o + back_o dx_prev.
+            let (m, back) = lin.slope[o];
+            let earlier = lin.prev[o].filter(|_| back != 0.0).and_then(|j| {
+                let at = work.shadows.iter().position(|(k, _)| *k == j)?;
+                Some(work.shadows.swap_remove(at).1)
+            });
+            if needed[o] {
+                work.shadows.push((o, r[..n].to_vec()));
+            }
+            for v in &mut r {
+                *v *= m;
+            }
+            if let Some(dx) = earlier {
+                for (v, d) in r.iter_mut().zip(dx) {
+                    *v += back * d;
+                }
+            }
             r[n] = -lin.r[o];
             work.pending.push(r);
             if work.pending.len() >= 2 * n {
@@ -462,8 +557,9 @@ impl ChainSystem {
                 complete(&mut work, &mut ops, next_complete);
                 next_complete += 1;
             }
-            open(&mut work, &mut ops, next_open);
+            open(&mut work, next_open);
             next_open += 1;
+            eliminate(&mut work, &mut ops, next_complete);
         }
         work.compress();
 
@@ -562,8 +658,8 @@ impl ChainSystem {
         let lin = &self.lin;
         let mut s = V9::zeros();
         let mut next = 0;
-        let mut model = 0.0;
-        for o in 0..lin.r.len() {
+        let mut dx = vec![0.0; lin.r.len()];
+        for (o, dx) in dx.iter_mut().enumerate() {
             let row = lin.rows[o];
             while next < lin.blocks.len()
                 && lin.blocks[next].last != usize::MAX
@@ -584,8 +680,14 @@ impl ChainSystem {
             for (g, &i) in lin.globals.iter().enumerate() {
                 jd += lin.jg[(o, g)] * delta[self.pos[i]];
             }
-            model += (lin.r[o] + jd).powi(2);
+            *dx = jd;
         }
+        let mut model: f64 = lin
+            .combine(&dx)
+            .iter()
+            .zip(lin.r.iter())
+            .map(|(jd, r)| (r + jd).powi(2))
+            .sum();
         for (row, entries) in self.prior_rows.iter().enumerate() {
             let v = self.lin.prior.residuals[row]
                 + entries.iter().map(|&(c, val)| val * delta[c]).sum::<f64>();

@@ -19,6 +19,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use super::Model;
+use super::observe::Whitener;
 use super::rotation::left_jacobian;
 
 /// Weighted residuals, their Jacobian with respect to the free parameters, and the cost.
@@ -218,24 +219,41 @@ impl Model {
         let obs = &self.observations;
         let sig = &self.signals;
         let mut k = 0;
+        let mut white = Whitener::new(&plan, obs);
+        // Per observation its slopes (own and previous); rows hold d x_k / d theta until combined.
+        let mut slopes = vec![(1.0, 0.0); obs.len()];
         self.prefix_sweep(theta, free, &plan.row, |row, p, delta, sums| {
             while k < obs.len() && plan.row[k] == row {
                 let o = &obs[k];
                 let beta = plan.beta[k];
                 let x = plan.position(k, p, delta);
-                let v = plan.value(k, o, x[o.axis]);
+                let v = white.value(k, x[o.axis]);
                 res[k] = v.r;
+                slopes[k] = (v.slope, v.back);
                 for &i in &sums.active {
-                    jac[(k, col_of[i])] = v.slope * sums.dp_at(i, &x, beta)[o.axis];
+                    jac[(k, col_of[i])] = sums.dp_at(i, &x, beta)[o.axis];
                 }
                 plan.for_extra(k, o.axis, delta, sig.dt[row], |i, d| {
                     if col_of[i] != usize::MAX {
-                        jac[(k, col_of[i])] += v.slope * d;
+                        jac[(k, col_of[i])] += d;
                     }
                 });
                 k += 1;
             }
         });
+        // d r_k = slope_k d x_k + back_k d x_prev, last row first so that the
+        // previous row is still d x when it is read.
+        for k in (0..obs.len()).rev() {
+            let (slope, back) = slopes[k];
+            match plan.links[k].prev {
+                Some(j) if back != 0.0 => {
+                    for c in 0..columns.len() {
+                        jac[(k, c)] = slope * jac[(k, c)] + back * jac[(j, c)];
+                    }
+                }
+                _ => jac.row_mut(k).scale_mut(slope),
+            }
+        }
 
         let prior = self.prior_rows(theta);
         let base = obs.len();

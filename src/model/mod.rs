@@ -19,6 +19,7 @@
 mod adjoint;
 mod chain;
 mod jacobian;
+mod noise;
 mod normal;
 mod observe;
 pub mod rotation;
@@ -71,6 +72,10 @@ pub struct ModelSpec {
     pub sigma_vertical_m: f64,
     /// Barometric altitude noise (m).
     pub sigma_baro_m: f64,
+    /// Correlation time of the GPS error (s, first-order Gauss-Markov, see
+    /// [`noise`]); `None` = independent fixes (the paper).
+    #[serde(default)]
+    pub gps_tau_s: Option<f64>,
     pub increment: Increment,
 }
 
@@ -83,6 +88,7 @@ impl Default for ModelSpec {
             sigma_horizontal_m: 3.0,
             sigma_vertical_m: 8.0,
             sigma_baro_m: 1.0,
+            gps_tau_s: None,
             increment: Increment::Exact,
         }
     }
@@ -196,6 +202,14 @@ impl Model {
                     "{name} must be a positive number of metres, got {v}"
                 )));
             }
+        }
+        if let Some(tau) = spec.gps_tau_s
+            && !(tau.is_finite() && (0.0..noise::MAX_TAU_S).contains(&tau))
+        {
+            return Err(ModelError::Setting(format!(
+                "GPS correlation time must be between 0 and {} s, got {tau}",
+                noise::MAX_TAU_S
+            )));
         }
         let ids = effects::expand(&spec.effects, &signals)?;
         let effects: Vec<Box<dyn Effect>> = ids

@@ -20,6 +20,7 @@
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 
 use super::Model;
+use super::observe::Whitener;
 use crate::effects::PriorRows;
 
 pub(crate) type V9 = SVector<f64, 9>;
@@ -38,8 +39,11 @@ pub struct NormalEquations {
 /// The linearised residuals of a model whose local parameters (segment
 /// biases) act on disjoint stretches of steps, kept in the form that both the
 /// dense normal equations and the O(N) chain solver ([`super::chain`]) use:
-/// per observation `o` the residual `r_o`, the 9-vector `h_o`, its global row
-/// and its explicit row for the block it lies in; per block parameter `y_c`.
+/// per observation `o` the residual `r_o`, and the derivative of its path
+/// value `x_o` as the 9-vector `h_o`, its global row and its explicit row for
+/// the block it lies in; per block parameter `y_c`. The residual's row is
+/// `slope_o dx_o + back_o dx_prev(o)` (see [`super::noise`]: `back` is 0
+/// without GPS error correlation).
 #[derive(Clone, Debug)]
 pub(crate) struct ChainLinearisation {
     /// Free parameters, in parameter order.
@@ -50,7 +54,7 @@ pub(crate) struct ChainLinearisation {
     pub blocks: Vec<Block>,
     /// `y_c = [U_c; V_c; D_c]` of each block's parameters once the block is complete.
     pub y: Vec<Vec<V9>>,
-    /// `h_o = w_o (row_a(-[p]x), -e_a, e_a)`.
+    /// `h_o = (row_a(-[p]x), -e_a, e_a)`: `d x_o = h_o . y_c` for a block complete before `o`.
     pub h: Vec<V9>,
     /// Where on the path observation `o` looks (`p`).
     pub at: Vec<Vector3<f64>>,
@@ -60,8 +64,11 @@ pub(crate) struct ChainLinearisation {
     pub jg: DMatrix<f64>,
     /// Block an observation lies in (`u32::MAX`: none) and its entries there.
     pub jb: Vec<(u32, [f64; 3])>,
-    /// Weighted residuals of the observations.
+    /// Residuals of the observations (whitened, through the robust loss).
     pub r: DVector<f64>,
+    /// `(d r_o / d x_o, d r_o / d x_prev)` and the linked previous observation.
+    pub slope: Vec<(f64, f64)>,
+    pub prev: Vec<Option<usize>>,
     /// Prior rows (entries of free parameters only).
     pub prior: PriorRows,
     /// Cost of observations and priors.
@@ -86,6 +93,7 @@ impl Model {
     pub fn normal_equations(&self, theta: &[f64], free: &[bool]) -> NormalEquations {
         self.structured_normal_equations(theta, free)
             .unwrap_or_else(|| {
+                // Dense: models without segments, and whitened (coupled) rows.
                 let lin = self.linearise(theta, free);
                 let jt = lin.jacobian.transpose();
                 NormalEquations {
@@ -174,6 +182,8 @@ impl Model {
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
         let mut r = DVector::<f64>::zeros(no);
+        let mut slope = vec![(1.0, 0.0); no];
+        let mut white = Whitener::new(&plan, obs);
         let mut k = 0usize;
         let mut y: Vec<Vec<V9>> = blocks
             .iter()
@@ -187,18 +197,18 @@ impl Model {
                 let beta = plan.beta[k];
                 let p = plan.position(k, p_row, delta);
                 at[k] = p;
-                let v = plan.value(k, o, p[a]);
-                let w = v.slope;
+                let v = white.value(k, p[a]);
                 r[k] = v.r;
+                slope[k] = (v.slope, v.back);
                 for (g, &i) in globals.iter().enumerate() {
-                    jg[(k, g)] = w * sums.dp_at(i, &p, beta)[a];
+                    jg[(k, g)] = sums.dp_at(i, &p, beta)[a];
                 }
                 plan.for_extra(k, a, delta, sig.dt[row], |i, d| {
                     if let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX) {
-                        jg[(k, g)] += w * d;
+                        jg[(k, g)] += d;
                     }
                 });
-                // h_o: w (row a of -[p]x, -e_a, e_a).
+                // h_o: (row a of -[p]x, -e_a, e_a).
                 let mut hv = V9::zeros();
                 match a {
                     0 => {
@@ -216,12 +226,12 @@ impl Model {
                 }
                 hv[3 + a] = -1.0;
                 hv[6 + a] = 1.0;
-                h[k] = hv * w;
+                h[k] = hv;
                 let b = block_at[row];
                 if b != u32::MAX {
                     let mut vals = [0.0; 3];
                     for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
-                        vals[kk] = w * sums.dp_at(i, &p, beta)[a];
+                        vals[kk] = sums.dp_at(i, &p, beta)[a];
                     }
                     jb[k] = (b, vals);
                 }
@@ -258,21 +268,52 @@ impl Model {
             jg,
             jb,
             r,
+            slope,
+            prev: plan.links.iter().map(|l| l.prev).collect(),
             prior,
             cost: cost + prior_cost,
             horizon: self.horizon(),
         })
     }
 
+    /// The moment form, for rows that each see one observation (no GPS error correlation).
     fn structured_normal_equations(&self, theta: &[f64], free: &[bool]) -> Option<NormalEquations> {
         let c = self.chain_linearisation(theta, free)?;
+        if c.is_coupled() {
+            return None;
+        }
         Some(c.normal_equations(self.n_params()))
     }
 }
 
 impl ChainLinearisation {
-    /// `J^T J` and `J^T r` assembled densely from the moments (O(N + P^2)).
+    /// Whether some residual row depends on two observations (whitened GPS errors).
+    pub fn is_coupled(&self) -> bool {
+        self.slope.iter().any(|&(_, back)| back != 0.0)
+    }
+
+    /// `J delta` of every residual row, from `d x delta` of the observations
+    /// (`dx[o]`): `slope_o dx_o + back_o dx_prev(o)`.
+    pub fn combine(&self, dx: &[f64]) -> Vec<f64> {
+        (0..dx.len())
+            .map(|o| {
+                let (m, n) = self.slope[o];
+                m * dx[o] + self.prev[o].map_or(0.0, |j| n * dx[j])
+            })
+            .collect()
+    }
+
+    /// `J^T J` and `J^T r` assembled densely from the moments (O(N + P^2)),
+    /// for uncoupled rows (each row is `slope_o` times its observation's).
     fn normal_equations(&self, np: usize) -> NormalEquations {
+        let mut scaled = self.clone();
+        for (o, &(m, _)) in self.slope.iter().enumerate() {
+            scaled.h[o] *= m;
+            scaled.jg.row_mut(o).scale_mut(m);
+            for v in &mut scaled.jb[o].1 {
+                *v *= m;
+            }
+        }
         let ChainLinearisation {
             columns,
             globals,
@@ -285,7 +326,7 @@ impl ChainLinearisation {
             r,
             prior,
             ..
-        } = self;
+        } = &scaled;
         let no = r.len();
         let ng = globals.len();
         // Suffix moments after each block: first observation past its last step.

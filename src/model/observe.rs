@@ -17,9 +17,14 @@
 //! Every derivative is `d r_k / d theta = psi'(e_k) w_k (d x_k / d theta - d y_k / d theta)`
 //! with `d x_k / d lag = -Delta_j[a] / dt_j`. Without lag `j` is the fix's own
 //! row and `beta = 0`, which is the paper's objective (eq. 7).
+//!
+//! With a GPS correlation time (see [`super::noise`]) `psi` acts on the
+//! whitened `e'_k = c_k (e_k - a_k e_{k-1})` instead, and `r_k` has a second
+//! slope, on the previous fix's `x`: [`ObsValue::back`].
 
 use nalgebra::Vector3;
 
+use super::noise::{self, Link};
 use super::{Model, Observation};
 use crate::effects::TargetSite;
 
@@ -40,6 +45,8 @@ pub(crate) struct ObsPlan {
     lag_moves: Vec<bool>,
     /// Cauchy scale on GPS rows (weighted units).
     robust: Option<f64>,
+    /// Each observation's link to the previous fix (GPS error correlation).
+    pub links: Vec<Link>,
 }
 
 /// One observation's residual and slope.
@@ -47,8 +54,11 @@ pub(crate) struct ObsPlan {
 pub(crate) struct ObsValue {
     /// `r_k`, the residual that enters the cost.
     pub r: f64,
-    /// `d r_k / d x_k = psi'(e_k) w_k`.
+    /// `d r_k / d x_k = psi'(e'_k) c_k w_k`.
     pub slope: f64,
+    /// `d r_k / d x_prev = -psi'(e'_k) c_k a_k w_prev` on the linked previous
+    /// observation (`links[k].prev`; 0 when there is none).
+    pub back: f64,
     /// `x_k - y_k` (m).
     pub metres: f64,
 }
@@ -67,29 +77,56 @@ fn cauchy(e: f64, s: f64) -> (f64, f64) {
     (psi, e / ((1.0 + u * u) * psi))
 }
 
-impl ObsPlan {
-    /// Residual of observation `k` whose path value is `x`.
-    #[inline]
-    pub fn value(&self, k: usize, o: &Observation, x: f64) -> ObsValue {
-        let metres = x - self.target[k];
-        let e = o.w * metres;
-        match self.robust {
-            Some(s) if !o.baro => {
-                let (r, d) = cauchy(e, s);
-                ObsValue {
-                    r,
-                    slope: d * o.w,
-                    metres,
-                }
-            }
-            _ => ObsValue {
-                r: e,
-                slope: o.w,
-                metres,
-            },
+/// The residuals of the observations, computed in observation order: a
+/// whitened residual needs the previous fix's weighted residual.
+pub(crate) struct Whitener<'a> {
+    plan: &'a ObsPlan,
+    obs: &'a [Observation],
+    /// `e_k = w_k (x_k - y_k)` of the observations seen so far.
+    e: Vec<f64>,
+}
+
+impl<'a> Whitener<'a> {
+    pub fn new(plan: &'a ObsPlan, obs: &'a [Observation]) -> Self {
+        Self {
+            plan,
+            obs,
+            e: vec![0.0; obs.len()],
         }
     }
 
+    /// Residual of observation `k` whose path value is `x`; every
+    /// observation before `k` that `k` is linked to must have been seen.
+    #[inline]
+    pub fn value(&mut self, k: usize, x: f64) -> ObsValue {
+        let o = &self.obs[k];
+        let metres = x - self.plan.target[k];
+        let e = o.w * metres;
+        self.e[k] = e;
+        let link = self.plan.links[k];
+        let (white, w_prev) = match link.prev {
+            Some(j) => (link.c * (e - link.a * self.e[j]), self.obs[j].w),
+            None => (e, 0.0),
+        };
+        let (r, d) = match self.plan.robust {
+            Some(s) if !o.baro => cauchy(white, s),
+            _ => (white, 1.0),
+        };
+        ObsValue {
+            r,
+            slope: d * link.c * o.w,
+            back: -d * link.c * link.a * w_prev,
+            metres,
+        }
+    }
+
+    /// Residuals of every observation, from their path values in order.
+    pub fn all(mut self, x: impl Iterator<Item = f64>) -> Vec<ObsValue> {
+        x.enumerate().map(|(k, x)| self.value(k, x)).collect()
+    }
+}
+
+impl ObsPlan {
     /// `x_k` from the path at its row and the step that ends there.
     #[inline]
     pub fn x(&self, k: usize, axis: usize, p: &Vector3<f64>, delta: &Vector3<f64>) -> f64 {
@@ -264,6 +301,7 @@ impl Model {
             lag,
             lag_moves,
             robust,
+            links: noise::links(obs, self.spec.gps_tau_s),
         }
     }
 }

@@ -5,6 +5,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::Model;
+use super::observe::Whitener;
 
 /// Rows per chunk of the parallel forward sweep (and at most this many chunks):
 /// a 30-minute ride at 100 Hz is two chunks, one per core of a small machine.
@@ -356,15 +357,16 @@ impl Model {
     /// Weighted residuals (observations, then priors) of a computed path.
     pub fn residuals_of(&self, theta: &[f64], path: &Trajectory) -> Vec<f64> {
         let plan = self.obs_plan(theta);
-        let mut r: Vec<f64> = self
-            .observations
-            .iter()
-            .enumerate()
-            .map(|(k, o)| {
-                let j = plan.row[k];
-                let delta = path.p[j] - path.p[j.max(1) - 1];
-                plan.value(k, o, plan.x(k, o.axis, &path.p[j], &delta)).r
-            })
+        let obs = &self.observations;
+        let x = obs.iter().enumerate().map(|(k, o)| {
+            let j = plan.row[k];
+            let delta = path.p[j] - path.p[j.max(1) - 1];
+            plan.x(k, o.axis, &path.p[j], &delta)
+        });
+        let mut r: Vec<f64> = Whitener::new(&plan, obs)
+            .all(x)
+            .into_iter()
+            .map(|v| v.r)
             .collect();
         r.extend(self.prior_rows(theta).residuals);
         r
@@ -386,8 +388,9 @@ impl Model {
         let obs = &self.observations;
         let fw = self.forward(theta, self.sweep_start(theta), None, &plan.row, false);
         let mut ev = Evaluation::default();
+        let mut white = Whitener::new(&plan, obs);
         for (k, o) in obs.iter().enumerate() {
-            let v = plan.value(k, o, plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
+            let v = white.value(k, plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
             ev.cost += v.r * v.r;
             let slot = match (o.axis, o.baro) {
                 (2, true) => 2,

@@ -7,10 +7,15 @@ use super::*;
 use crate::testing::winding_signals;
 
 fn model(increment: Increment, walk: Option<f64>) -> Model {
+    correlated_model(increment, walk, None)
+}
+
+fn correlated_model(increment: Increment, walk: Option<f64>, tau: Option<f64>) -> Model {
     let sig = Arc::new(winding_signals(60.0, 50.0));
     let spec = ModelSpec {
         segment_s: 7.0,
         bias_walk_dps_sqrt_s: walk,
+        gps_tau_s: tau,
         increment,
         ..ModelSpec::default()
     };
@@ -20,6 +25,12 @@ fn model(increment: Increment, walk: Option<f64>) -> Model {
 /// The paper's model plus the whole effect catalogue, on a simulated ride
 /// with barometer and temperature channel.
 fn catalogue_model() -> Model {
+    catalogue_model_with(None)
+}
+
+/// The catalogue with GPS errors correlated over `tau` (whitened residuals
+/// through the robust loss of `gps_outliers`, lag-interpolated fixes).
+fn catalogue_model_with(tau: Option<f64>) -> Model {
     let sig = Arc::new(crate::testing::simulated_signals(
         4,
         60.0,
@@ -34,6 +45,7 @@ fn catalogue_model() -> Model {
     let spec = ModelSpec {
         effects,
         segment_s: 7.0,
+        gps_tau_s: tau,
         ..ModelSpec::default()
     };
     let m = Model::new(sig, spec).unwrap();
@@ -59,6 +71,8 @@ fn models() -> Vec<Model> {
         model(Increment::Exact, Some(0.01)),
         model(Increment::SmallAngle, Some(0.01)),
         catalogue_model(),
+        correlated_model(Increment::Exact, Some(0.01), Some(20.0)),
+        catalogue_model_with(Some(45.0)),
     ]
 }
 
@@ -75,6 +89,8 @@ fn gradient_matches_finite_differences() {
     for m in models() {
         let inc = m.effect_ids();
         let p = perturbed(&m);
+        let linked = m.obs_plan(&p).links.iter().filter(|l| l.prev.is_some()).count();
+        assert_eq!(linked > 0, m.spec.gps_tau_s.is_some(), "{linked} links");
         let (cost, g) = m.gradient(&p);
         assert!((cost - m.cost(&p)).abs() < 1e-9 * cost);
         let scale = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
@@ -204,6 +220,8 @@ fn chain_solver_gives_the_dense_lm_step() {
         model(Increment::Exact, None),
         model(Increment::SmallAngle, Some(0.01)),
         full,
+        correlated_model(Increment::Exact, Some(0.01), Some(20.0)),
+        catalogue_model_with(Some(45.0)),
     ] {
         for roles in [
             vec![effects::Role::Global, effects::Role::Segments],
