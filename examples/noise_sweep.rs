@@ -57,6 +57,7 @@ fn main() -> anyhow::Result<()> {
                 let mut settings = FitSettings::default();
                 settings.model.bias_walk_dps_sqrt_s = Some(prior);
                 settings.model.sigma_horizontal_m = sigma;
+                settings.model.gps_tau_s = std::env::var("TAU").ok().and_then(|t| t.parse().ok());
                 let mut fit = Reconstruction::new(sig.clone(), settings.clone())?;
                 fit.finish();
                 let e = sim.errors(&sig, &fit.trajectory().p);

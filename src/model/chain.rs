@@ -385,6 +385,17 @@ impl ChainSystem {
     /// The LM step for damping `lambda`: the minimiser of the damped problem
     /// in the module docs, one entry per free column; `None` if not finite.
     pub fn solve(&self, lambda: f64) -> Option<DVector<f64>> {
+        self.solve_with_log_det(lambda).map(|(x, _)| x)
+    }
+
+    /// The step and `ln det(J^T J + J_p^T J_p + lambda D)`, the log-determinant
+    /// of the information matrix the step solves with (at `lambda = 0` the
+    /// posterior precision a marginal likelihood needs). The QR gives it for
+    /// free: the array is `R S^-1` in scaled unknowns `S x` (`S = sqrt(D)`),
+    /// its diagonal from the eliminated blocks and the final rows, and the six
+    /// rows pinning `s` contribute exactly `PIN^12` (the changes of variables
+    /// `s <- s + Y x_b` have determinant 1).
+    pub fn solve_with_log_det(&self, lambda: f64) -> Option<(DVector<f64>, f64)> {
         let lin = &self.lin;
         let nf = lin.columns.len();
         let ng = lin.globals.len();
@@ -563,6 +574,18 @@ impl ChainSystem {
         }
         work.compress();
 
+        let mut log_det = self.diag.iter().map(|d| d.ln()).sum::<f64>() - 12.0 * PIN.ln();
+        for op in &ops {
+            if let Op::Eliminate { rows, .. } = op {
+                for i in 0..rows.nrows() {
+                    log_det += 2.0 * rows[(i, i)].abs().ln();
+                }
+            }
+        }
+        for i in 0..work.rows.nrows() {
+            log_det += 2.0 * work.rows[(i, i)].abs().ln();
+        }
+
         // Backward pass.
         let n = work.n();
         let last = solve_upper(
@@ -620,7 +643,10 @@ impl ChainSystem {
         for (g, &c) in global_col.iter().enumerate() {
             delta[c] = xg[g] / scale[c];
         }
-        delta.iter().all(|v| v.is_finite()).then_some(delta)
+        delta
+            .iter()
+            .all(|v| v.is_finite())
+            .then_some((delta, log_det))
     }
 
     /// Prior rows of stage `stage` into the array, in scaled unknowns.

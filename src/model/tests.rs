@@ -242,6 +242,28 @@ fn chain_solver_gives_the_dense_lm_step() {
             let fast = chain.solve(lambda).unwrap();
             let err = (&fast - &dense).norm() / dense.norm();
             assert!(err < 1e-6, "lambda {lambda}: relative difference {err:e}");
+            if lambda == 1e-3 {
+                // ln det(A + lambda D), D = diag(A): the chain's QR against a dense Cholesky.
+                let mut a = ne.a.clone();
+                let max_diag = a.diagonal().max();
+                for i in 0..a.nrows() {
+                    let d = a[(i, i)].max(1e-9 * max_diag);
+                    a[(i, i)] += lambda * d + 1e-15 * max_diag;
+                }
+                let dense_ld = 2.0
+                    * a.cholesky()
+                        .unwrap()
+                        .l()
+                        .diagonal()
+                        .iter()
+                        .map(|v| v.ln())
+                        .sum::<f64>();
+                let (_, chain_ld) = chain.solve_with_log_det(lambda).unwrap();
+                assert!(
+                    (chain_ld - dense_ld).abs() < 1e-6 * dense_ld.abs().max(1.0),
+                    "case {:?} log det {chain_ld} vs {dense_ld}", (m.n_params(), m.spec.gps_tau_s, free.iter().filter(|&&f| f).count())
+                );
+            }
             let predicted = -(2.0 * dense.dot(&ne.g) + dense.dot(&(&ne.a * &dense)));
             let fast_predicted = chain.predicted_decrease(&dense);
             assert!(
