@@ -12,7 +12,9 @@ use gyropath::diagnosis::{Diagnosis, Folds, limits};
 use gyropath::export::{FitReport, write_atomically, write_path_csv};
 use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
-use gyropath::optimisation::{FitSettings, IterationReport, Method, Phase, Reconstruction};
+use gyropath::optimisation::{
+    AutoNoise, FitSettings, IterationReport, Method, Phase, Reconstruction,
+};
 use gyropath::signals::Signals;
 use gyropath::simulation::{self, SimConfig};
 
@@ -209,12 +211,15 @@ pub struct SettingsArgs {
     /// Iteration limit for each step.
     #[arg(long, default_value_t = 200)]
     pub max_iter: usize,
-    /// Random-walk density of the segment-bias prior in deg/s/sqrt(s), or `none` for the paper's model without prior.
-    #[arg(long, default_value_t = DEFAULT_BIAS_WALK.to_string())]
+    /// Random-walk density of the segment-bias prior in deg/s/sqrt(s), `auto`
+    /// (estimated from the ride by restricted marginal likelihood), or `none`
+    /// for the paper's model without prior.
+    #[arg(long, default_value = "auto")]
     pub bias_walk: String,
-    /// GPS horizontal noise (m), weights the horizontal residuals.
-    #[arg(long, default_value_t = 3.0)]
-    pub gps_sigma: f64,
+    /// GPS noise: `auto` (sigma and correlation time estimated from the ride),
+    /// `SIGMA` in m (independent fixes), or `SIGMA,TAU` (error correlated over TAU s).
+    #[arg(long, alias = "gps-sigma", default_value = "auto")]
+    pub gps_noise: String,
     /// Increment map: exact exponential or the paper's small-angle quaternion.
     #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
     pub increment: IncrementArg,
@@ -280,17 +285,38 @@ impl SettingsArgs {
     pub fn settings(&self) -> Result<FitSettings> {
         let walk = match self.bias_walk.trim() {
             "none" | "off" => None,
-            v => Some(
-                v.parse::<f64>()
-                    .with_context(|| format!("--bias-walk: '{v}' is not a number or 'none'"))?,
-            ),
+            "auto" => Some(DEFAULT_BIAS_WALK),
+            v => Some(v.parse::<f64>().with_context(|| {
+                format!("--bias-walk: '{v}' is not a number, 'auto' or 'none'")
+            })?),
+        };
+        let (sigma, tau) = match self.gps_noise.trim() {
+            "auto" => (ModelSpec::default().sigma_horizontal_m, None),
+            v => {
+                let bad = || format!("--gps-noise: '{v}' is not 'auto', SIGMA or SIGMA,TAU");
+                let mut parts = v.split(',').map(str::trim);
+                let sigma: f64 = parts.next().unwrap_or("").parse().with_context(bad)?;
+                let tau: Option<f64> = parts
+                    .next()
+                    .map(|t| t.parse::<f64>().with_context(bad))
+                    .transpose()?;
+                if parts.next().is_some() {
+                    anyhow::bail!(bad());
+                }
+                (sigma, tau)
+            }
         };
         Ok(FitSettings {
+            auto_noise: AutoNoise {
+                gps: self.gps_noise.trim() == "auto",
+                walk: self.bias_walk.trim() == "auto",
+            },
             model: ModelSpec {
                 effects: split_list(&self.effects),
                 segment_s: self.segment_s,
                 bias_walk_dps_sqrt_s: walk,
-                sigma_horizontal_m: self.gps_sigma,
+                sigma_horizontal_m: sigma,
+                gps_tau_s: tau,
                 increment: match self.increment {
                     IncrementArg::Exact => Increment::Exact,
                     IncrementArg::SmallAngle => Increment::SmallAngle,
@@ -340,6 +366,7 @@ fn phase_name(p: Phase) -> &'static str {
     match p {
         Phase::Step1 => "step 1",
         Phase::Step2 => "step 2",
+        Phase::Noise => "noise",
         Phase::Done => "done",
     }
 }
@@ -579,6 +606,18 @@ fn print_summary(r: &FitReport) {
     );
     println!("model     {}", r.model.join(", "));
     println!("attitude  {}", r.attitude);
+    match &r.noise {
+        Some(n) => println!("noise     from the ride: {}", n.describe()),
+        None => println!(
+            "noise     GPS sigma {:.2} m, {}, bias walk {} (set)",
+            r.gps_sigma_m,
+            r.gps_tau_s.map_or("independent fixes".into(), |t| format!(
+                "correlated over {t:.0} s"
+            )),
+            r.bias_walk
+                .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))
+        ),
+    }
     println!(
         "iters     step 1: {}, step 2: {}",
         r.iterations_step1, r.iterations_step2

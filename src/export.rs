@@ -162,6 +162,13 @@ pub struct FitReport {
     pub stats: FitStats,
     /// The attitude model (3D or planar) and why it was chosen.
     pub attitude: String,
+    /// The noise settings the fit ran with (`settings.model` holds what was
+    /// asked for): estimated from the ride, with their 1-sigma ranges, or set.
+    pub noise: Option<crate::optimisation::NoiseEstimate>,
+    /// The effective GPS sigma (m), correlation time (s, `None`: independent fixes) and bias walk.
+    pub gps_sigma_m: f64,
+    pub gps_tau_s: Option<f64>,
+    pub bias_walk: Option<f64>,
     /// Parameters per effect id.
     pub parameters: BTreeMap<String, Vec<ParamValue>>,
     pub warnings: Vec<String>,
@@ -196,6 +203,10 @@ impl FitReport {
             iterations_step2: s2,
             stats: fit.stats(),
             attitude: sig.attitude.describe(),
+            noise: fit.noise().cloned(),
+            gps_sigma_m: model.spec.sigma_horizontal_m,
+            gps_tau_s: model.spec.gps_tau_s,
+            bias_walk: model.spec.bias_walk_dps_sqrt_s,
             parameters,
             warnings: sig.warnings.clone(),
             elapsed_s,

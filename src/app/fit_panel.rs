@@ -34,6 +34,7 @@ impl GyropathApp {
             let phase = match s.phase {
                 Phase::Step1 => "step 1 (constant bias, start, gain)",
                 Phase::Step2 => "step 2 (segment biases)",
+                Phase::Noise => "noise settings from the data",
                 Phase::Done => "done",
             };
             egui::Grid::new("fit-state").num_columns(2).show(ui, |ui| {

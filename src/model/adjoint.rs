@@ -62,9 +62,8 @@ impl Model {
 
         // d C / d x_k of every observation: 2 r_k on its own x and, through a
         // whitened residual, on the previous fix's x too (see `noise`).
-        let values = Whitener::new(&plan, obs).all(
-            (0..obs.len()).map(|k| plan.x(k, obs[k].axis, &path.p[k], &path.delta[k])),
-        );
+        let values = Whitener::new(&plan, obs)
+            .all((0..obs.len()).map(|k| plan.x(k, obs[k].axis, &path.p[k], &path.delta[k])));
         let mut g_x = vec![0.0; obs.len()];
         for (k, v) in values.iter().enumerate() {
             cost += v.r * v.r;

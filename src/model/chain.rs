@@ -301,7 +301,11 @@ impl ChainSystem {
                 }
                 for (x, &i) in block.params.iter().enumerate() {
                     let own = if row <= block.last {
-                        if lin.jb[o].0 == b as u32 { m * lin.jb[o].1[x] } else { 0.0 }
+                        if lin.jb[o].0 == b as u32 {
+                            m * lin.jb[o].1[x]
+                        } else {
+                            0.0
+                        }
                     } else {
                         m * lin.h[o].dot(&lin.y[b][x])
                     };

@@ -24,7 +24,7 @@
 //! `c_k = 1 / sqrt(1 - a_k^2)`. The gradient, the Jacobian and the chain
 //! solver each take the two coefficients from [`Link`].
 
-use super::Observation;
+use super::{Model, Observation};
 
 /// Two fixes further apart than this (s) are not linked: the second starts a new chain.
 pub const OUTAGE_S: f64 = 10.0;
@@ -85,11 +85,32 @@ pub(crate) fn links(obs: &[Observation], tau: Option<f64>) -> Vec<Link> {
     out
 }
 
-/// The log-determinant of the whitening, `sum_k ln c_k^2`: the noise
-/// covariance of a chain is `det = prod sigma_k^2 (1 - a_k^2)`, so this is
-/// what the correlation takes off `sum ln sigma_k^2` in a marginal likelihood.
-pub(crate) fn log_det_whitening(links: &[Link]) -> f64 {
-    links.iter().map(|l| 2.0 * l.c.ln()).sum()
+impl Model {
+    /// `ln det` of the covariance of everything the cost weighs: the
+    /// observations' (`prod sigma_k^2 (1 - a_k^2)`: a chain's covariance
+    /// determinant is its innovations') and the prior rows' with a free
+    /// entry (`1 / w^2` per row). A marginal likelihood adds it to the cost.
+    pub(crate) fn noise_log_det(&self, theta: &[f64], free: &[bool]) -> f64 {
+        let plan = self.obs_plan(theta);
+        let obs: f64 = self
+            .observations
+            .iter()
+            .zip(&plan.links)
+            .map(|(o, l)| -2.0 * o.w.ln() - 2.0 * l.c.ln())
+            .sum();
+        let prior = self.prior_rows(theta);
+        let mut weight = vec![0.0f64; prior.residuals.len()];
+        for &(row, col, v) in &prior.entries {
+            if free[col] {
+                weight[row] = weight[row].max(v.abs());
+            }
+        }
+        obs + weight
+            .iter()
+            .filter(|w| **w > 0.0)
+            .map(|w| -2.0 * w.ln())
+            .sum::<f64>()
+    }
 }
 
 #[cfg(test)]

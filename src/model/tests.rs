@@ -89,7 +89,12 @@ fn gradient_matches_finite_differences() {
     for m in models() {
         let inc = m.effect_ids();
         let p = perturbed(&m);
-        let linked = m.obs_plan(&p).links.iter().filter(|l| l.prev.is_some()).count();
+        let linked = m
+            .obs_plan(&p)
+            .links
+            .iter()
+            .filter(|l| l.prev.is_some())
+            .count();
         assert_eq!(linked > 0, m.spec.gps_tau_s.is_some(), "{linked} links");
         let (cost, g) = m.gradient(&p);
         assert!((cost - m.cost(&p)).abs() < 1e-9 * cost);
@@ -261,7 +266,12 @@ fn chain_solver_gives_the_dense_lm_step() {
                 let (_, chain_ld) = chain.solve_with_log_det(lambda).unwrap();
                 assert!(
                     (chain_ld - dense_ld).abs() < 1e-6 * dense_ld.abs().max(1.0),
-                    "case {:?} log det {chain_ld} vs {dense_ld}", (m.n_params(), m.spec.gps_tau_s, free.iter().filter(|&&f| f).count())
+                    "case {:?} log det {chain_ld} vs {dense_ld}",
+                    (
+                        m.n_params(),
+                        m.spec.gps_tau_s,
+                        free.iter().filter(|&&f| f).count()
+                    )
                 );
             }
             let predicted = -(2.0 * dense.dot(&ne.g) + dense.dot(&(&ne.a * &dense)));

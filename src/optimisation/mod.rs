@@ -20,6 +20,7 @@
 
 pub mod gd;
 pub mod lm;
+pub mod noise;
 
 use std::sync::Arc;
 
@@ -31,6 +32,7 @@ use crate::signals::Signals;
 
 pub use gd::GdState;
 pub use lm::{LmState, StepOutcome};
+pub use noise::{AutoNoise, Estimated, NoiseEstimate};
 
 /// Why a fit could not be set up.
 #[derive(Debug, Error)]
@@ -74,6 +76,11 @@ pub struct FitSettings {
     pub max_iter: usize,
     /// Stop when an accepted step lowers the cost by less than this fraction.
     pub tolerance: f64,
+    /// Noise settings estimated from the ride (see [`noise`]), overriding the
+    /// model's GPS sigma and correlation time and its bias walk once step 2
+    /// has converged; the fit then resumes step 2 with them.
+    #[serde(default)]
+    pub auto_noise: AutoNoise,
 }
 
 impl Default for FitSettings {
@@ -85,6 +92,7 @@ impl Default for FitSettings {
             damping: 1e-3,
             max_iter: 200,
             tolerance: 1e-7,
+            auto_noise: AutoNoise::default(),
         }
     }
 }
@@ -121,6 +129,8 @@ pub enum Phase {
     Step1,
     /// Per-segment biases.
     Step2,
+    /// Noise settings from the data (one likelihood search), then step 2 again.
+    Noise,
     Done,
 }
 
@@ -215,6 +225,10 @@ pub struct Reconstruction {
     widened: bool,
     /// The last whole-ride RMS (see [`IterationReport::ride_rms_m`]).
     ride_rms_m: Option<f64>,
+    /// The noise settings estimated from the ride, in force in `model`.
+    noise: Option<NoiseEstimate>,
+    /// The noise search has run for the current model (or is not wanted).
+    noise_done: bool,
 }
 
 /// Step 1's window: the first `length` seconds of the ride, seen by `model`.
@@ -271,6 +285,8 @@ impl Reconstruction {
             ..settings
         };
         let mut fit = Self::at(model, theta, settings, true)?;
+        // A resumed fit keeps the noise settings of the model it was given.
+        fit.noise_done = true;
         if fit.has_segments() {
             fit.phase = Phase::Step2;
         }
@@ -301,6 +317,8 @@ impl Reconstruction {
             ride_rms_m: None,
             window: None,
             widened,
+            noise: None,
+            noise_done: false,
         })
     }
 
@@ -374,6 +392,11 @@ impl Reconstruction {
     }
 
     /// Iterations spent in step 1 and step 2.
+    /// The noise settings estimated from the ride, if the fit has estimated them.
+    pub fn noise(&self) -> Option<&NoiseEstimate> {
+        self.noise.as_ref()
+    }
+
     pub fn phase_iterations(&self) -> [usize; 2] {
         self.phase_iterations
     }
@@ -498,6 +521,7 @@ impl Reconstruction {
         let slot = match phase {
             Phase::Step1 => 0,
             Phase::Step2 => 1,
+            Phase::Noise => return Some(self.estimate_noise()),
             Phase::Done => return None,
         };
         let free = self.mask(phase);
@@ -569,12 +593,75 @@ impl Reconstruction {
             self.stage_iterations = 0;
             self.phase = match phase {
                 Phase::Step1 if self.has_segments() => Phase::Step2,
+                Phase::Step2 if self.wants_noise() => Phase::Noise,
                 _ => Phase::Done,
             };
             self.lm = LmState::new(self.settings.damping);
             self.gd = GdState::new(self.settings.step_size);
         }
         Some(self.report(phase, outcome, stage_done))
+    }
+
+    /// Whether the noise search is still to run: asked for, not yet run on
+    /// this model, and a model with segment biases (the bias walk and the GPS
+    /// noise are only told apart through them).
+    fn wants_noise(&self) -> bool {
+        self.settings.auto_noise.any() && !self.noise_done && self.has_segments()
+    }
+
+    /// The spec the fit runs: the settings' model with the estimated noise
+    /// in place of the settings the estimate covers.
+    fn effective_spec(&self, spec: &ModelSpec) -> ModelSpec {
+        let (Some(n), auto) = (&self.noise, self.settings.auto_noise) else {
+            return spec.clone();
+        };
+        let mut out = spec.clone();
+        let estimated = n.apply(spec);
+        if auto.gps {
+            out.sigma_horizontal_m = estimated.sigma_horizontal_m;
+            out.sigma_vertical_m = estimated.sigma_vertical_m;
+            out.gps_tau_s = estimated.gps_tau_s;
+        }
+        if auto.walk {
+            out.bias_walk_dps_sqrt_s = estimated.bias_walk_dps_sqrt_s;
+        }
+        out
+    }
+
+    /// The noise phase's one iteration: search the likelihood, rebuild the
+    /// model with what it prefers and go back to step 2.
+    fn estimate_noise(&mut self) -> IterationReport {
+        self.noise_done = true;
+        let free = self
+            .model
+            .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let before = self.model.cost(&self.theta);
+        let found = noise::estimate(&self.model, &self.theta, &free, self.settings.auto_noise);
+        let mut outcome = StepOutcome {
+            cost_before: before,
+            cost: before,
+            accepted: false,
+            converged: true,
+            evaluations: found.as_ref().map_or(0, |n| n.evaluations),
+            evaluation: None,
+        };
+        if let Some(n) = found {
+            self.noise = Some(n);
+            let spec = self.effective_spec(&self.settings.model);
+            if let Ok(model) =
+                Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
+            {
+                self.theta = model.carry_over(&self.model, &self.theta);
+                self.model = model;
+                outcome.cost = self.model.cost(&self.theta);
+                outcome.accepted = true;
+            }
+        }
+        self.iteration += 1;
+        self.phase = Phase::Step2;
+        self.phase_iterations[1] = 0;
+        self.lm = LmState::new(self.settings.damping);
+        self.report(Phase::Noise, outcome, true)
     }
 
     fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
@@ -632,12 +719,20 @@ impl Reconstruction {
             return Ok(());
         }
         let effects_changed = new.model.effects != self.settings.model.effects;
-        if new.model != self.settings.model {
-            let model = Model::with_start(
-                self.model.signals.clone(),
-                new.model.clone(),
-                self.model.start.clone(),
-            )?;
+        if new.auto_noise != self.settings.auto_noise {
+            // Asked anew: search again (the estimate stays in force meanwhile
+            // for what is still automatic).
+            self.noise_done = !new.auto_noise.any();
+        }
+        if new.model != self.settings.model || new.auto_noise != self.settings.auto_noise {
+            if effects_changed || new.model.segment_s != self.settings.model.segment_s {
+                self.noise_done = !new.auto_noise.any();
+            }
+            let old = std::mem::replace(&mut self.settings.auto_noise, new.auto_noise);
+            let spec = self.effective_spec(&new.model);
+            self.settings.auto_noise = old;
+            let model =
+                Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())?;
             check_observability(&model)?;
             self.theta = model.carry_over(&self.model, &self.theta);
             self.model = model;
