@@ -44,6 +44,40 @@ impl GyropathApp {
                     .text("GD step size γ"),
             )
             .changed();
+        changed |= ui
+            .checkbox(&mut fit.auto_noise.gps, "GPS noise from the ride")
+            .on_hover_text(
+                "estimate the GPS sigma and the correlation time of its error by restricted \
+                 marginal likelihood once step 2 has converged; off = set them here",
+            )
+            .changed();
+        if !fit.auto_noise.gps {
+            changed |= ui
+                .add(
+                    egui::Slider::new(&mut fit.model.sigma_horizontal_m, 0.1..=30.0)
+                        .logarithmic(true)
+                        .text("GPS sigma (m)"),
+                )
+                .changed();
+            let mut correlated = fit.model.gps_tau_s.is_some();
+            if ui
+                .checkbox(&mut correlated, "GPS error correlated")
+                .on_hover_text("first-order Gauss-Markov; off = independent fixes (the paper)")
+                .changed()
+            {
+                fit.model.gps_tau_s = correlated.then_some(20.0);
+                changed = true;
+            }
+            if let Some(t) = fit.model.gps_tau_s.as_mut() {
+                changed |= ui
+                    .add(
+                        egui::Slider::new(t, 0.5..=1800.0)
+                            .logarithmic(true)
+                            .text("correlation time (s)"),
+                    )
+                    .changed();
+            }
+        }
         let mut prior = fit.model.bias_walk_dps_sqrt_s.is_some();
         if ui
             .checkbox(&mut prior, "bias smoothness prior")
@@ -53,9 +87,17 @@ impl GyropathApp {
             .changed()
         {
             fit.model.bias_walk_dps_sqrt_s = prior.then_some(DEFAULT_BIAS_WALK);
+            if !prior {
+                fit.auto_noise.walk = false;
+            }
             changed = true;
         }
-        if let Some(w) = fit.model.bias_walk_dps_sqrt_s.as_mut() {
+        if prior {
+            changed |= ui
+                .checkbox(&mut fit.auto_noise.walk, "bias walk from the ride")
+                .changed();
+        }
+        if let (Some(w), false) = (fit.model.bias_walk_dps_sqrt_s.as_mut(), fit.auto_noise.walk) {
             changed |= ui
                 .add(
                     egui::Slider::new(w, 1e-4..=1e-1)
@@ -63,6 +105,22 @@ impl GyropathApp {
                         .text("bias walk (deg/s/sqrt(s))"),
                 )
                 .changed();
+        }
+        if let Some(n) = self.snapshot.as_ref().and_then(|s| s.noise.as_ref()) {
+            ui.label("The ride prefers (1-sigma range):");
+            egui::Grid::new("noise_estimate")
+                .num_columns(2)
+                .show(ui, |ui| {
+                    ui.label("GPS sigma");
+                    ui.label(n.gps_sigma_m.describe("m", 2));
+                    ui.end_row();
+                    ui.label("correlated over");
+                    ui.label(n.gps_tau_s.describe("s", 0));
+                    ui.end_row();
+                    ui.label("bias walk");
+                    ui.label(n.bias_walk.describe("°/s/√s", 4));
+                    ui.end_row();
+                });
         }
         changed
     }

@@ -133,6 +133,8 @@ pub struct Snapshot {
     pub effects: Vec<String>,
     /// Physical limits the current parameters break (see `diagnosis::limits`).
     pub violations: Vec<String>,
+    /// The noise settings estimated from the ride, once the fit has them.
+    pub noise: Option<crate::optimisation::NoiseEstimate>,
 }
 
 /// Worker -> UI.
@@ -572,5 +574,6 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
             .iter()
             .map(ToString::to_string)
             .collect(),
+        noise: fit.noise().cloned(),
     }
 }

@@ -381,6 +381,10 @@ impl ChainSystem {
         self.lin.cost
     }
 
+    pub(crate) fn linearisation(&self) -> &ChainLinearisation {
+        &self.lin
+    }
+
     /// Parameter index of each entry of a step.
     pub fn columns(&self) -> &[usize] {
         &self.lin.columns

@@ -58,6 +58,8 @@ pub(crate) struct ChainLinearisation {
     pub h: Vec<V9>,
     /// Where on the path observation `o` looks (`p`).
     pub at: Vec<Vector3<f64>>,
+    /// The path value `x_o` (component of `at`) it compares.
+    pub x: Vec<f64>,
     /// Row in whose step observation `o` is evaluated.
     pub rows: Vec<usize>,
     /// Rows of the global parameters (observations x globals).
@@ -179,6 +181,7 @@ impl Model {
         let plan = self.obs_plan(theta);
         let mut h = vec![V9::zeros(); no];
         let mut at = vec![Vector3::zeros(); no];
+        let mut xs = vec![0.0; no];
         let mut jg = DMatrix::<f64>::zeros(no, ng);
         let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
         let mut r = DVector::<f64>::zeros(no);
@@ -197,6 +200,7 @@ impl Model {
                 let beta = plan.beta[k];
                 let p = plan.position(k, p_row, delta);
                 at[k] = p;
+                xs[k] = p[a];
                 let v = white.value(k, p[a]);
                 r[k] = v.r;
                 slope[k] = (v.slope, v.back);
@@ -264,6 +268,7 @@ impl Model {
             y,
             h,
             at,
+            x: xs,
             rows: plan.row,
             jg,
             jb,
@@ -274,6 +279,30 @@ impl Model {
             cost: cost + prior_cost,
             horizon: self.horizon(),
         })
+    }
+
+    /// `lin` (made by a model on the same ride with the same effects and
+    /// segments, at the same `theta`) with this model's noise: the
+    /// derivatives of the path are unchanged, only the residuals, their
+    /// slopes and links and the prior rows are this model's. O(fixes), not
+    /// O(rows): what a search over noise settings needs.
+    pub(crate) fn reweighted(&self, lin: &ChainLinearisation, theta: &[f64]) -> ChainLinearisation {
+        let plan = self.obs_plan(theta);
+        let mut white = Whitener::new(&plan, &self.observations);
+        let mut out = lin.clone();
+        for (k, &x) in lin.x.iter().enumerate() {
+            let v = white.value(k, x);
+            out.r[k] = v.r;
+            out.slope[k] = (v.slope, v.back);
+        }
+        out.prev = plan.links.iter().map(|l| l.prev).collect();
+        let mut prior = self.prior_rows(theta);
+        let prior_cost = prior.residuals.iter().map(|x| x * x).sum::<f64>();
+        let free: std::collections::HashSet<usize> = lin.columns.iter().copied().collect();
+        prior.entries.retain(|(_, col, _)| free.contains(col));
+        out.cost = out.r.norm_squared() + prior_cost;
+        out.prior = prior;
+        out
     }
 
     /// The moment form, for rows that each see one observation (no GPS error correlation).

@@ -392,6 +392,11 @@ impl Reconstruction {
     }
 
     /// Iterations spent in step 1 and step 2.
+    /// The fitted model and its parameters.
+    pub fn into_parts(self) -> (Model, Vec<f64>) {
+        (self.model, self.theta)
+    }
+
     /// The noise settings estimated from the ride, if the fit has estimated them.
     pub fn noise(&self) -> Option<&NoiseEstimate> {
         self.noise.as_ref()
@@ -605,8 +610,14 @@ impl Reconstruction {
     /// Whether the noise search is still to run: asked for, not yet run on
     /// this model, and a model with segment biases (the bias walk and the GPS
     /// noise are only told apart through them).
+    /// A fit that breaks a physical limit (see [`crate::diagnosis::limits`])
+    /// is not searched: a loose bias walk would let the segment biases hide
+    /// what is wrong (wrong axes, units), and the fit must fail with its cause.
     fn wants_noise(&self) -> bool {
-        self.settings.auto_noise.any() && !self.noise_done && self.has_segments()
+        self.settings.auto_noise.any()
+            && !self.noise_done
+            && self.has_segments()
+            && crate::diagnosis::limits::check(&self.model, &self.theta).is_empty()
     }
 
     /// The spec the fit runs: the settings' model with the estimated noise
