@@ -57,7 +57,7 @@ fn main() -> anyhow::Result<()> {
                 let mut settings = FitSettings::default();
                 settings.model.bias_walk_dps_sqrt_s = Some(prior);
                 settings.model.sigma_horizontal_m = sigma;
-                settings.model.gps_tau_s = std::env::var("TAU").ok().and_then(|t| t.parse().ok());
+                settings.auto_noise = gyropath::optimisation::AutoNoise::OFF;
                 let mut fit = Reconstruction::new(sig.clone(), settings.clone())?;
                 fit.finish();
                 let e = sim.errors(&sig, &fit.trajectory().p);
@@ -75,40 +75,22 @@ fn main() -> anyhow::Result<()> {
                 }
             }
         }
-        // Auto: fit with the defaults, estimate the noise, refit, twice.
-        let t0 = std::time::Instant::now();
-        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default())?;
-        fit.finish();
-        for _ in 0..2 {
-            let free = fit.model().free_mask(&[
-                gyropath::effects::Role::Global,
-                gyropath::effects::Role::Segments,
-                gyropath::effects::Role::Step2Only,
-            ]);
-            let Some(est) = gyropath::optimisation::noise::estimate(
-                fit.model(),
-                fit.params(),
-                &free,
-                gyropath::optimisation::noise::AutoNoise::default(),
-            ) else {
-                break;
-            };
-            let mut settings = fit.settings().clone();
-            settings.model = est.apply(&settings.model);
-            println!(
-                "  auto: {} ({} evaluations)",
-                est.describe(),
-                est.evaluations
-            );
-            fit.apply_settings(settings)?;
+        // The defaults (GPS noise from the ride), and with the bias walk from the ride too.
+        for walk_auto in [false, true] {
+            let t0 = std::time::Instant::now();
+            let mut settings = FitSettings::default();
+            settings.auto_noise.walk = walk_auto;
+            let mut fit = Reconstruction::new(sig.clone(), settings)?;
             fit.finish();
+            let e = sim.errors(&sig, &fit.trajectory().p);
+            println!(
+                "seed {seed}: auto{} {:.3} m from the truth ({:.2} s): {}",
+                if walk_auto { " with walk" } else { "" },
+                e.path_at_fixes_m,
+                t0.elapsed().as_secs_f64(),
+                fit.noise().map_or("no estimate".into(), |n| n.describe())
+            );
         }
-        let e = sim.errors(&sig, &fit.trajectory().p);
-        println!(
-            "seed {seed}: auto {:.3} m from the truth ({:.2} s)",
-            e.path_at_fixes_m,
-            t0.elapsed().as_secs_f64()
-        );
         println!(
             "seed {seed}: closest to the truth: prior {} sigma {} ({:.3} m); held-out picks prior {} sigma {} ({:.3} m from the truth)",
             best_truth.1,

@@ -214,7 +214,7 @@ pub struct SettingsArgs {
     /// Random-walk density of the segment-bias prior in deg/s/sqrt(s), `auto`
     /// (estimated from the ride by restricted marginal likelihood), or `none`
     /// for the paper's model without prior.
-    #[arg(long, default_value = "auto")]
+    #[arg(long, default_value_t = DEFAULT_BIAS_WALK.to_string())]
     pub bias_walk: String,
     /// GPS noise: `auto` (sigma and correlation time estimated from the ride),
     /// `SIGMA` in m (independent fixes), or `SIGMA,TAU` (error correlated over TAU s).

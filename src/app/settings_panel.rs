@@ -115,7 +115,11 @@ impl GyropathApp {
                     ui.label(n.gps_sigma_m.describe("m", 2));
                     ui.end_row();
                     ui.label("correlated over");
-                    ui.label(n.gps_tau_s.describe("s", 0));
+                    ui.label(if n.gps_tau_s.value > 0.0 {
+                        n.gps_tau_s.describe("s", 0)
+                    } else {
+                        "independent fixes (set)".to_string()
+                    });
                     ui.end_row();
                     ui.label("bias walk");
                     ui.label(n.bias_walk.describe("°/s/√s", 4));

@@ -132,10 +132,14 @@ impl NoiseEstimate {
 
     /// One line for a summary.
     pub fn describe(&self) -> String {
+        let tau = if self.gps_tau_s.value > 0.0 {
+            format!("correlated over {}", self.gps_tau_s.describe("s", 0))
+        } else {
+            "independent fixes (set)".to_string()
+        };
         format!(
-            "GPS sigma {}, correlated over {}, bias walk {}",
+            "GPS sigma {}, {tau}, bias walk {}",
             self.gps_sigma_m.describe("m", 2),
-            self.gps_tau_s.describe("s", 0),
             self.bias_walk.describe("deg/s/sqrt(s)", 4)
         )
     }

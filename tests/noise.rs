@@ -1,0 +1,158 @@
+//! Noise settings from the ride (issue 13) against simulated truth: rides
+//! whose GPS error is correlated over a minute (plus white noise) and whose
+//! gyro bias walks at a known density.
+
+mod common;
+
+use std::sync::Arc;
+
+use gyropath::diagnosis::{Folds, diagnose};
+use gyropath::import::parse;
+use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::{SimConfig, SimulatedRide, simulate};
+
+const TRUE_WALK: f64 = 0.004;
+
+fn ride(seed: u64, duration_s: f64, gps: &str) -> (SimulatedRide, Arc<Signals>) {
+    let sim = simulate(&SimConfig {
+        seed,
+        duration_s,
+        bias_walk_dps_sqrt_s: Some(TRUE_WALK),
+        gps: gps.parse().expect("environment"),
+        ..SimConfig::default()
+    })
+    .expect("simulate");
+    let sig = Signals::from_log(&parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
+        .expect("signals");
+    (sim, Arc::new(sig))
+}
+
+fn truth_error(sim: &SimulatedRide, sig: &Signals, settings: FitSettings) -> f64 {
+    let mut fit = Reconstruction::new(Arc::new(sig.clone()), settings).expect("fit");
+    fit.finish();
+    sim.errors(sig, &fit.trajectory().p).path_at_fixes_m
+}
+
+#[test]
+fn default_settings_are_within_5_percent_of_the_best_swept_by_hand() {
+    for seed in [1, 2] {
+        let (sim, sig) = ride(seed, 900.0, "open");
+        let mut best = (f64::INFINITY, 0.0, 0.0);
+        for sigma in [1.5, 3.0, 6.0] {
+            for walk in [0.001, 0.002, 0.004, 0.008] {
+                let mut s = FitSettings {
+                    auto_noise: AutoNoise::OFF,
+                    ..FitSettings::default()
+                };
+                s.model.sigma_horizontal_m = sigma;
+                s.model.bias_walk_dps_sqrt_s = Some(walk);
+                let e = truth_error(&sim, &sig, s);
+                if e < best.0 {
+                    best = (e, sigma, walk);
+                }
+            }
+        }
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+        fit.finish();
+        let errors = sim.errors(&sig, &fit.trajectory().p);
+        let auto = errors.path_at_fixes_m;
+        let noise = fit.noise().expect("the default estimates the GPS noise");
+        eprintln!(
+            "seed {seed}: auto {auto:.3} m ({}), best by hand {:.3} m (sigma {} m, walk {}), fixes {:.3} m",
+            noise.describe(),
+            best.0,
+            best.1,
+            best.2,
+            errors.fixes_m
+        );
+        assert!(
+            auto <= 1.05 * best.0,
+            "seed {seed}: {auto} m vs {} m",
+            best.0
+        );
+        assert!(
+            auto <= 0.8 * errors.fixes_m,
+            "seed {seed}: {auto} m vs fixes {} m",
+            errors.fixes_m
+        );
+        // The estimate says how sure it is: a finite range around the value.
+        let s = noise.gps_sigma_m;
+        assert!(s.estimated && s.low < s.value && s.value < s.high && s.high < 2.0 * s.value);
+        // The simulator's GPS error is 1.5 m correlated over 60 s plus 0.5 m white
+        // per axis: a single Gauss-Markov process sees the white part as a short
+        // correlation time and a sigma between the two.
+        assert!((0.5..2.0).contains(&s.value), "sigma {}", s.value);
+        assert!(noise.gps_tau_s.value > 1.0, "tau {}", noise.gps_tau_s.value);
+    }
+}
+
+#[test]
+fn the_bias_walk_estimate_brackets_the_true_walk() {
+    let (_, sig) = ride(3, 900.0, "open");
+    let mut settings = FitSettings::default();
+    settings.auto_noise.walk = true;
+    let mut fit = Reconstruction::new(sig, settings).expect("fit");
+    fit.finish();
+    let w = fit.noise().expect("estimated").bias_walk;
+    let sd = (w.high / w.value).ln();
+    let off = (w.value / TRUE_WALK).ln().abs();
+    eprintln!(
+        "walk {:.5} ({:.5}-{:.5}) vs true {TRUE_WALK}",
+        w.value, w.low, w.high
+    );
+    assert!(w.estimated && sd > 0.0 && sd < 1.0, "range {w:?}");
+    assert!(off <= 2.0 * sd + 0.05, "walk {w:?} vs {TRUE_WALK}");
+}
+
+#[test]
+fn a_city_ride_points_at_gps_outliers_and_the_fit_with_them_beats_the_fixes() {
+    let (sim, sig) = ride(7, 1200.0, "urban");
+    let d = diagnose(
+        sig.clone(),
+        &FitSettings::default(),
+        &Folds::default(),
+        &|_| {},
+    )
+    .expect("diagnose");
+    let first = &d.ranking[0];
+    eprintln!(
+        "urban: {} first ({:+.1} %, t {:.1}, significant {})",
+        first.effect,
+        100.0 * first.drop,
+        first.t_statistic,
+        first.significant
+    );
+    assert_eq!(first.effect, "gps_outliers");
+    assert!(first.significant);
+    let mut settings = FitSettings::default();
+    settings.model.effects.push("gps_outliers".into());
+    let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
+    fit.finish();
+    let e = sim.errors(&sig, &fit.trajectory().p);
+    eprintln!(
+        "urban: path {:.2} m, fixes {:.2} m from the truth",
+        e.path_at_fixes_m, e.fixes_m
+    );
+    assert!(
+        e.path_at_fixes_m <= 0.4 * e.fixes_m,
+        "{} m vs {} m",
+        e.path_at_fixes_m,
+        e.fixes_m
+    );
+}
+
+#[test]
+fn the_noise_search_keeps_what_is_set_by_hand() {
+    let (_, sig) = common::ride(8, 300.0, &[]);
+    let mut settings = FitSettings {
+        auto_noise: AutoNoise::OFF,
+        ..FitSettings::default()
+    };
+    settings.model.gps_tau_s = Some(30.0);
+    let mut fit = Reconstruction::new(sig, settings).expect("fit");
+    fit.finish();
+    assert!(fit.noise().is_none());
+    assert_eq!(fit.model().spec.gps_tau_s, Some(30.0));
+    assert_eq!(fit.model().spec.sigma_horizontal_m, 3.0);
+}
