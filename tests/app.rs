@@ -71,6 +71,20 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
     assert!(rms < 3.0, "GPS RMS {rms}");
     // The fit panel and the model history's row both show the fit RMS.
     assert_eq!(h.get_all_by_label(&format!("{rms:.3} m")).count(), 2);
+    // The GPS noise the ride prefers, with its range, in the settings panel.
+    let noise = h
+        .state()
+        .snapshot
+        .as_ref()
+        .and_then(|s| s.noise.clone())
+        .expect("the fit estimates the GPS noise");
+    h.get_by_label("The ride prefers (1-sigma range):");
+    h.get_by_label(&noise.gps_sigma_m.describe("m", 2));
+    // Unticked, the noise is set by hand.
+    h.get_by_label("GPS noise from the ride").click();
+    h.run();
+    assert!(!h.state().settings.fit.auto_noise.gps);
+    h.get_by_label("GPS error correlated");
 }
 
 #[test]
