@@ -641,6 +641,8 @@ fn print_summary(r: &FitReport) {
             .map(|p| {
                 if p.fixed {
                     format!("{} not fitted", p.name)
+                } else if let Some(sigma) = p.sigma {
+                    format!("{} {:.5} ± {:.5} {}", p.name, p.value, sigma, p.unit)
                 } else {
                     format!("{} {:.5} {}", p.name, p.value, p.unit)
                 }

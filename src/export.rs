@@ -146,6 +146,10 @@ pub struct ParamValue {
     pub unit: String,
     /// Held at its starting value, not fitted (roll and pitch of a planar model).
     pub fixed: bool,
+    /// 1-sigma uncertainty under the fit's noise model (see
+    /// `model::uncertainty`); `None` where not computed (segment biases, the
+    /// constant bias, fixed parameters).
+    pub sigma: Option<f64>,
 }
 
 /// The fit report written by `gyropath fit --report`.
@@ -181,14 +185,20 @@ impl FitReport {
         let sig = &model.signals;
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
         let fixed = model.fixed_mask();
-        for (((effect, info), value), fixed) in
-            model.param_infos().into_iter().zip(fit.params()).zip(fixed)
+        let sigmas = model.parameter_sigmas(fit.params());
+        for ((((effect, info), value), fixed), sigma) in model
+            .param_infos()
+            .into_iter()
+            .zip(fit.params())
+            .zip(fixed)
+            .zip(sigmas)
         {
             parameters.entry(effect).or_default().push(ParamValue {
                 name: info.name,
                 value: value * info.scale,
                 unit: info.unit.to_string(),
                 fixed,
+                sigma: sigma.map(|s| s * info.scale.abs()),
             });
         }
         let [s1, s2] = fit.phase_iterations();

@@ -64,6 +64,14 @@ pub struct ChainSystem {
     prior_rows: Vec<Vec<(usize, f64)>>,
 }
 
+/// What a solve finds: the step, `ln det` of the information matrix, and
+/// the final triangle's block of the global columns (scaled unknowns).
+struct Solved {
+    delta: DVector<f64>,
+    log_det: f64,
+    r_globals: DMatrix<f64>,
+}
+
 /// A change made during the forward pass, undone in reverse by the backward pass.
 enum Op {
     /// The origin of `T` moved by `dc`.
@@ -404,6 +412,34 @@ impl ChainSystem {
     /// rows pinning `s` contribute exactly `PIN^12` (the changes of variables
     /// `s <- s + Y x_b` have determinant 1).
     pub fn solve_with_log_det(&self, lambda: f64) -> Option<(DVector<f64>, f64)> {
+        self.run(lambda).map(|s| (s.delta, s.log_det))
+    }
+
+    /// The covariance of the global parameters under the fit's own noise
+    /// model, `[(J^T J + J_p^T J_p)^-1]_GG`: the globals are the array's last
+    /// columns, so after the forward pass (every block eliminated by QR, i.e.
+    /// marginalised exactly) their information is `R_GG^T R_GG` of the final
+    /// triangle, and no dense inverse of the whole system is formed. Returns
+    /// the parameter index of each row and the matrix.
+    pub fn global_covariance(&self) -> Option<(Vec<usize>, DMatrix<f64>)> {
+        let solved = self.run(0.0)?;
+        let ng = solved.r_globals.nrows();
+        let inv = solved
+            .r_globals
+            .solve_upper_triangular(&DMatrix::identity(ng, ng))?;
+        let mut cov = &inv * inv.transpose();
+        for (a, &ia) in self.lin.globals.iter().enumerate() {
+            for (b, &ib) in self.lin.globals.iter().enumerate() {
+                cov[(a, b)] /= (self.diag[self.pos[ia]] * self.diag[self.pos[ib]]).sqrt();
+            }
+        }
+        cov.iter()
+            .all(|v| v.is_finite())
+            .then(|| (self.lin.globals.clone(), cov))
+    }
+
+    /// The forward pass and the backward pass (see the module docs).
+    fn run(&self, lambda: f64) -> Option<Solved> {
         let lin = &self.lin;
         let nf = lin.columns.len();
         let ng = lin.globals.len();
@@ -594,6 +630,9 @@ impl ChainSystem {
             log_det += 2.0 * work.rows[(i, i)].abs().ln();
         }
 
+        let g0 = work.g0();
+        let r_globals = work.rows.view((g0, g0), (ng, ng)).into_owned();
+
         // Backward pass.
         let n = work.n();
         let last = solve_upper(
@@ -651,10 +690,11 @@ impl ChainSystem {
         for (g, &c) in global_col.iter().enumerate() {
             delta[c] = xg[g] / scale[c];
         }
-        delta
-            .iter()
-            .all(|v| v.is_finite())
-            .then_some((delta, log_det))
+        delta.iter().all(|v| v.is_finite()).then_some(Solved {
+            delta,
+            log_det,
+            r_globals,
+        })
     }
 
     /// Prior rows of stage `stage` into the array, in scaled unknowns.

@@ -25,6 +25,7 @@ mod observe;
 pub mod rotation;
 mod start;
 mod sweep;
+mod uncertainty;
 
 pub use chain::ChainSystem;
 pub use jacobian::Linearisation;

@@ -1,0 +1,139 @@
+//! How sure the fit is of its parameters: 1-sigma uncertainties under the
+//! fit's own noise model (GPS correlation, per-fix accuracy, robust weights,
+//! priors), from the linearisation at the fitted parameters.
+//!
+//! `Cov(theta) = (J^T J + J_p^T J_p)^-1` with `J` the Jacobian of the whitened
+//! residuals: with the noise settings estimated from the ride the whitened
+//! residuals have unit variance, so no residual-based rescaling is applied (it
+//! would count correlated GPS error as information twice over). The global
+//! parameters' block comes from the O(N) chain solver's final triangle
+//! ([`super::ChainSystem::global_covariance`]); a model without segment
+//! biases is small enough for the dense normal equations.
+
+use nalgebra::DVector;
+
+use super::Model;
+use crate::effects::Role;
+use crate::optimisation::lm::damped_solve;
+
+/// Longest lag (fixes) of the residual autocorrelation that widens the sigmas.
+const MAX_LAG: usize = 120;
+
+impl Model {
+    /// The 1-sigma uncertainty of every parameter at `theta` (internal units)
+    /// that step 2 fits; `None` for parameters held fixed, for the constant
+    /// bias (step 2 leaves it to the segments: the two are one direction) and,
+    /// for now, for the segment biases.
+    pub fn parameter_sigmas(&self, theta: &[f64]) -> Vec<Option<f64>> {
+        let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let mut out = vec![None; self.n_params()];
+        let inflation = self.residual_inflation(theta);
+        if let Some(chain) = self.chain_system(theta, &free) {
+            if let Some((params, cov)) = chain.global_covariance() {
+                for (a, &i) in params.iter().enumerate() {
+                    out[i] = Some(inflation * cov[(a, a)].max(0.0).sqrt());
+                }
+            }
+            return out;
+        }
+        let ne = self.normal_equations(theta, &free);
+        for (c, &i) in ne.columns.iter().enumerate() {
+            let mut unit = DVector::zeros(ne.columns.len());
+            unit[c] = 1.0;
+            out[i] = damped_solve(&ne.a, &unit, 0.0).map(|x| inflation * x[c].max(0.0).sqrt());
+        }
+        out
+    }
+
+    /// `sqrt(1 + 2 sum_k rho_k)`: how much the residuals' remaining
+    /// correlation widens every sigma (the effective-sample-size correction).
+    /// The whitened residuals are white only if the noise model is right; a
+    /// single Gauss-Markov process fitted to GPS error that wanders over a
+    /// minute *and* has a white part settles on a short correlation time and
+    /// leaves the slow wander in the residuals, where it would be counted as
+    /// independent information. `rho_k` is the lag-`k` autocorrelation of the
+    /// east and north whitened residuals (fix to fix), summed with Bartlett
+    /// weights `1 - k / (K + 1)` up to `K =` [`MAX_LAG`] fixes (Newey-West:
+    /// the weights keep the estimate positive), the larger axis taken.
+    fn residual_inflation(&self, theta: &[f64]) -> f64 {
+        let r = self.residuals(theta);
+        let mut worst = 1.0f64;
+        for axis in 0..2 {
+            let x: Vec<f64> = self
+                .observations
+                .iter()
+                .zip(&r)
+                .filter(|(o, _)| o.axis == axis && !o.baro)
+                .map(|(_, v)| *v)
+                .collect();
+            let n = x.len();
+            if n < 3 * MAX_LAG {
+                continue;
+            }
+            let mean = x.iter().sum::<f64>() / n as f64;
+            let var = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+            if var <= 0.0 {
+                continue;
+            }
+            let mut sum = 0.0;
+            for k in 1..=MAX_LAG {
+                let c: f64 = (k..n)
+                    .map(|i| (x[i] - mean) * (x[i - k] - mean))
+                    .sum::<f64>()
+                    / var;
+                sum += (1.0 - k as f64 / (MAX_LAG + 1) as f64) * c;
+            }
+            worst = worst.max(1.0 + 2.0 * sum);
+        }
+        worst.sqrt()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::model::ModelSpec;
+
+    /// The chain's marginal covariance of the globals equals the dense
+    /// inverse of the full normal matrix, white and correlated (to 1e-4: the
+    /// rows pinning the chain's state carry a finite weight, see `chain`).
+    #[test]
+    fn global_sigmas_from_the_chain_equal_the_dense_inverse() {
+        for tau in [None, Some(20.0)] {
+            let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
+            let spec = ModelSpec {
+                gps_tau_s: tau,
+                ..ModelSpec::default()
+            };
+            let m = Model::new(sig, spec).unwrap();
+            let mut p = m.initial_params();
+            for (i, v) in p.iter_mut().enumerate() {
+                *v += 1e-4 * (i as f64).cos();
+            }
+            let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+            let lin = m.linearise(&p, &free);
+            let a = lin.jacobian.transpose() * &lin.jacobian;
+            let inv = a.clone().cholesky().expect("positive definite").inverse();
+            let inflation = m.residual_inflation(&p);
+            let sigmas: Vec<Option<f64>> = m
+                .parameter_sigmas(&p)
+                .iter()
+                .map(|s| s.map(|s| s / inflation))
+                .collect();
+            let mut globals = 0;
+            for (c, &i) in lin.columns.iter().enumerate() {
+                if let Some(s) = sigmas[i] {
+                    let dense = inv[(c, c)].sqrt();
+                    assert!(
+                        (s - dense).abs() < 1e-4 * dense,
+                        "tau {tau:?} param {i}: {s} vs {dense}"
+                    );
+                    globals += 1;
+                }
+            }
+            assert!(globals >= 7, "{globals} globals");
+        }
+    }
+}
