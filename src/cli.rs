@@ -426,10 +426,17 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         b.finish_and_clear();
     }
     physical(&fit)?;
-    let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
+    let uncertainty = (args.out.is_some() || args.report.is_some())
+        .then(|| {
+            fit.model()
+                .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED)
+        })
+        .flatten();
+    let report = FitReport::new(&fit, started.elapsed().as_secs_f64())
+        .with_uncertainty(fit.model(), uncertainty.as_ref());
     if let Some(out) = &args.out {
         write_atomically(out, Some(ride), |w| {
-            write_path_csv(w, fit.model(), fit.params())
+            write_path_csv(w, fit.model(), fit.params(), uncertainty.as_ref())
         })?;
     }
     if let Some(rep) = &args.report {
@@ -507,12 +514,16 @@ fn fit_one(
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;
-    let report = FitReport::new(&fit, started.elapsed().as_secs_f64());
+    let uncertainty = fit
+        .model()
+        .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED);
+    let report = FitReport::new(&fit, started.elapsed().as_secs_f64())
+        .with_uncertainty(fit.model(), uncertainty.as_ref());
     let stem = ride
         .file_stem()
         .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned());
     write_atomically(&out_dir.join(format!("{stem}-path.csv")), Some(ride), |w| {
-        write_path_csv(w, fit.model(), fit.params())
+        write_path_csv(w, fit.model(), fit.params(), uncertainty.as_ref())
     })?;
     write_atomically(
         &out_dir.join(format!("{stem}-report.json")),

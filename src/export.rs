@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use thiserror::Error;
 
 use crate::model::rotation::compass_deg;
-use crate::model::{Model, Trajectory};
+use crate::model::{Model, Trajectory, Uncertainty};
 use crate::optimisation::{FitSettings, FitStats, Reconstruction};
 
 #[derive(Debug, Error)]
@@ -64,12 +64,23 @@ pub fn write_atomically(
 }
 
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
-/// compass heading) for every row of the log.
-pub fn write_path_csv(out: &mut dyn Write, model: &Model, theta: &[f64]) -> std::io::Result<()> {
+/// compass heading, and with `sigma` the path's 1-sigma east, north and up)
+/// for every row of the log.
+pub fn write_path_csv(
+    out: &mut dyn Write,
+    model: &Model,
+    theta: &[f64],
+    sigma: Option<&Uncertainty>,
+) -> std::io::Result<()> {
     let sig = &model.signals;
     writeln!(
         out,
-        "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg"
+        "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg{}",
+        if sigma.is_some() {
+            ",sigma_east_m,sigma_north_m,sigma_up_m"
+        } else {
+            ""
+        }
     )?;
     // Row by row from one sweep: a 6-hour ride's path is never held in memory.
     let mut result = Ok(());
@@ -79,7 +90,7 @@ pub fn write_path_csv(out: &mut dyn Write, model: &Model, theta: &[f64]) -> std:
         }
         let g = sig.frame.to_geodetic(p);
         let f = q * nalgebra::Vector3::x();
-        result = writeln!(
+        result = write!(
             out,
             "{},{:.9},{:.9},{:.3},{:.3},{:.3},{:.3},{:.2}",
             sig.t[j],
@@ -90,7 +101,14 @@ pub fn write_path_csv(out: &mut dyn Write, model: &Model, theta: &[f64]) -> std:
             p.y,
             p.z,
             compass_deg(f.x, f.y)
-        );
+        )
+        .and_then(|_| match sigma {
+            Some(u) => {
+                let [e, n, up] = u.sigma_enu(j);
+                writeln!(out, ",{e:.3},{n:.3},{up:.3}")
+            }
+            None => writeln!(out),
+        });
     });
     result
 }
@@ -221,6 +239,29 @@ impl FitReport {
             warnings: sig.warnings.clone(),
             elapsed_s,
         }
+    }
+
+    /// The report with the sigma of every parameter that `u` has one for and
+    /// the report has not (the segment biases: from posterior draws, see
+    /// [`Model::uncertainty`]); `model` is the fit's.
+    pub fn with_uncertainty(mut self, model: &Model, u: Option<&Uncertainty>) -> Self {
+        let Some(u) = u else {
+            return self;
+        };
+        let mut next: BTreeMap<String, usize> = BTreeMap::new();
+        for ((effect, info), sigma) in model.param_infos().into_iter().zip(&u.params) {
+            let k = next.entry(effect.clone()).or_default();
+            if let (Some(v), Some(s)) = (
+                self.parameters.get_mut(&effect).and_then(|v| v.get_mut(*k)),
+                sigma,
+            ) && v.sigma.is_none()
+                && !v.fixed
+            {
+                v.sigma = Some(s * info.scale.abs());
+            }
+            *k += 1;
+        }
+        self
     }
 
     /// A parameter's shown value by effect id and name.

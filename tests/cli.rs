@@ -65,12 +65,19 @@ fn simulate_then_fit_writes_path_and_report() {
         - 1;
     let text = std::fs::read_to_string(&path).unwrap();
     let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    assert!(header.starts_with("t_s,lat_deg,lon_deg,alt_m"));
+    // The path's 1-sigma per row: positive, finite, metres.
     assert!(
-        lines
-            .next()
-            .unwrap()
-            .starts_with("t_s,lat_deg,lon_deg,alt_m")
+        header.ends_with(",sigma_east_m,sigma_north_m,sigma_up_m"),
+        "{header}"
     );
+    for line in text.lines().skip(1).step_by(997) {
+        for v in line.split(',').skip(8) {
+            let v: f64 = v.parse().unwrap();
+            assert!(v.is_finite() && v > 0.0 && v < 50.0, "{line}");
+        }
+    }
     assert_eq!(lines.count(), ride_rows);
     let truth_rows = std::fs::read_to_string(&truth).unwrap().lines().count() - 1;
     assert_eq!(truth_rows, ride_rows);
@@ -94,6 +101,19 @@ fn simulate_then_fit_writes_path_and_report() {
             .len(),
         3 * 24
     );
+    // Every fitted parameter has its sigma; the noise the fit ran with is reported.
+    let gain_sigma = json["parameters"]["odometer_gain"][0]["sigma"]
+        .as_f64()
+        .unwrap();
+    assert!(gain_sigma > 0.0 && gain_sigma < 0.05, "{gain_sigma}");
+    assert!(
+        json["parameters"]["gyro_bias_segments"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|p| p["sigma"].as_f64().is_some_and(|s| s > 0.0))
+    );
+    assert!(json["noise"]["gps_sigma_m"]["value"].as_f64().unwrap() > 0.0);
 
     // Never over the input log.
     let out = gyropath(&["fit", s(&ride), "--out", s(&ride)]);

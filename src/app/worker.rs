@@ -461,7 +461,10 @@ impl Worker {
         let model = fit.model();
         let result = match kind {
             ExportKind::PathCsv => {
-                write_atomically(path, protect, |w| write_path_csv(w, model, fit.params()))
+                let sigma = model.uncertainty(fit.params(), crate::model::UNCERTAINTY_SEED);
+                write_atomically(path, protect, |w| {
+                    write_path_csv(w, model, fit.params(), sigma.as_ref())
+                })
             }
             ExportKind::PathGpx => {
                 let traj = fit.trajectory();

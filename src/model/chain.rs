@@ -40,6 +40,7 @@
 use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
 
 use super::normal::{ChainLinearisation, V9};
+use crate::simulation::rng::Rng;
 
 /// Weight of the rows that pin the initial state `s` to zero.
 const PIN: f64 = 1e8;
@@ -70,6 +71,17 @@ struct Solved {
     delta: DVector<f64>,
     log_det: f64,
     r_globals: DMatrix<f64>,
+    forward: Forward,
+}
+
+/// What the forward pass leaves for the backward pass.
+struct Forward {
+    /// The final triangle `[R | z]` over (open blocks, `s`, globals).
+    rows: DMatrix<f64>,
+    open: Vec<(usize, usize)>,
+    ops: Vec<Op>,
+    /// Column scaling `sqrt(D)` of the unknowns.
+    scale: Vec<f64>,
 }
 
 /// A change made during the forward pass, undone in reverse by the backward pass.
@@ -441,7 +453,6 @@ impl ChainSystem {
     /// The forward pass and the backward pass (see the module docs).
     fn run(&self, lambda: f64) -> Option<Solved> {
         let lin = &self.lin;
-        let nf = lin.columns.len();
         let ng = lin.globals.len();
         let scale: Vec<f64> = self.diag.iter().map(|d| d.sqrt()).collect();
         let damping: Vec<f64> = self
@@ -633,22 +644,49 @@ impl ChainSystem {
         let g0 = work.g0();
         let r_globals = work.rows.view((g0, g0), (ng, ng)).into_owned();
 
-        // Backward pass.
-        let n = work.n();
-        let last = solve_upper(
-            work.rows.view((0, 0), (n, n)),
-            &work.rows.column(n).into_owned(),
-        )?;
+        let forward = Forward {
+            rows: work.rows,
+            open: work.open,
+            ops,
+            scale,
+        };
+        let delta = self.backward(&forward, None)?;
+        Some(Solved {
+            delta,
+            log_det,
+            r_globals,
+            forward,
+        })
+    }
+
+    /// The backward pass: back-substitution through the final triangle and
+    /// the eliminated blocks in reverse, undoing the changes of variables.
+    /// With `noise` the right-hand sides are standard normal draws instead of
+    /// the array's `z`: the result is then a draw of the posterior deviation
+    /// `R^-1 xi`, whose covariance is `(R^T R)^-1`, the posterior covariance
+    /// (at the forward pass's damping; 0 for [`Self::posterior_draws`]).
+    fn backward(&self, f: &Forward, mut noise: Option<&mut Rng>) -> Option<DVector<f64>> {
+        let lin = &self.lin;
+        let blocks = &lin.blocks;
+        let nb = blocks.len();
+        let mut rhs = |rows: &DMatrix<f64>, m: usize| -> DVector<f64> {
+            match noise.as_deref_mut() {
+                Some(rng) => DVector::from_fn(m, |_, _| rng.normal()),
+                None => rows.column(rows.ncols() - 1).rows(0, m).into_owned(),
+            }
+        };
+        let n = f.rows.nrows();
+        let last = solve_upper(f.rows.view((0, 0), (n, n)), &rhs(&f.rows, n))?;
         let mut xb: Vec<Vec<f64>> = vec![Vec::new(); nb];
         let mut c = 0;
-        for &(b, m) in &work.open {
+        for &(b, m) in &f.open {
             xb[b] = last[c..c + m].to_vec();
             c += m;
         }
         let mut s = [0.0; 6];
         s.copy_from_slice(&last[c..c + 6]);
         let xg = last[c + 6..].to_vec();
-        for op in ops.into_iter().rev() {
+        for op in f.ops.iter().rev() {
             match op {
                 Op::Shift(dc) => {
                     let u = Vector3::new(s[0], s[1], s[2]);
@@ -659,42 +697,53 @@ impl ChainSystem {
                 }
                 Op::Complete { block, y6 } => {
                     for (x, v) in y6.iter().enumerate() {
-                        let xv = xb[block].get(x).copied().unwrap_or(0.0);
+                        let xv = xb[*block].get(x).copied().unwrap_or(0.0);
                         for k in 0..6 {
                             s[k] -= v[k] * xv;
                         }
                     }
                 }
                 Op::Eliminate { block, rows, rest } => {
-                    let m = blocks[block].params.len();
+                    let m = blocks[*block].params.len();
                     let mut known: Vec<f64> = Vec::new();
-                    for &b in &rest {
+                    for &b in rest {
                         known.extend_from_slice(&xb[b]);
                     }
                     known.extend_from_slice(&s);
                     known.extend_from_slice(&xg);
                     let rest_cols = rows.ncols() - 1 - m;
-                    let rhs = rows.column(m + rest_cols)
-                        - rows.view((0, m), (m, rest_cols)) * DVector::from_vec(known);
-                    xb[block] = solve_upper(rows.view((0, 0), (m, m)), &rhs)?;
+                    let rhs =
+                        rhs(rows, m) - rows.view((0, m), (m, rest_cols)) * DVector::from_vec(known);
+                    xb[*block] = solve_upper(rows.view((0, 0), (m, m)), &rhs)?;
                 }
             }
         }
+        let nf = lin.columns.len();
         let mut delta = DVector::<f64>::zeros(nf);
         for (b, block) in blocks.iter().enumerate() {
             for (x, &i) in block.params.iter().enumerate() {
                 let c = self.pos[i];
-                delta[c] = xb[b].get(x).copied().unwrap_or(0.0) / scale[c];
+                delta[c] = xb[b].get(x).copied().unwrap_or(0.0) / f.scale[c];
             }
         }
-        for (g, &c) in global_col.iter().enumerate() {
-            delta[c] = xg[g] / scale[c];
+        for (g, &i) in lin.globals.iter().enumerate() {
+            let c = self.pos[i];
+            delta[c] = xg[g] / f.scale[c];
         }
-        delta.iter().all(|v| v.is_finite()).then_some(Solved {
-            delta,
-            log_det,
-            r_globals,
-        })
+        delta.iter().all(|v| v.is_finite()).then_some(delta)
+    }
+
+    /// `k` draws of the posterior deviation of the free parameters
+    /// (`N(0, (J^T J + J_p^T J_p)^-1)`, one entry per free column), from one
+    /// forward pass and `k` backward passes with random right-hand sides:
+    /// O(N + k S) and never a dense inverse. What the marginal sigmas of the
+    /// segment biases and of the path are estimated from.
+    pub fn posterior_draws(&self, k: usize, seed: u64) -> Option<Vec<DVector<f64>>> {
+        let solved = self.run(0.0)?;
+        let mut rng = Rng::new(seed);
+        (0..k)
+            .map(|_| self.backward(&solved.forward, Some(&mut rng)))
+            .collect()
     }
 
     /// Prior rows of stage `stage` into the array, in scaled unknowns.

@@ -33,6 +33,7 @@ pub use normal::NormalEquations;
 pub use rotation::Increment;
 pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, PathAt, SparsePath, Trajectory};
+pub use uncertainty::{DRAWS, UNCERTAINTY_SEED, Uncertainty};
 
 use std::sync::Arc;
 

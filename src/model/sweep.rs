@@ -177,7 +177,7 @@ impl Model {
 
     /// Eq. 1-4 from `start` (a row and the state there) to the horizon.
     #[inline]
-    fn sweep_from(
+    pub(crate) fn sweep_from(
         &self,
         theta: &[f64],
         (first, mut q, mut p): Start,

@@ -1,0 +1,64 @@
+//! How often the truth lies inside the path's 95 % sigma ellipse, on
+//! simulated rides, under the noise settings estimated from the ride and
+//! under settings given by hand.
+//!
+//! `cargo run --release --example calibration -- [duration_s] [seeds...]`
+
+use std::sync::Arc;
+
+use gyropath::import::parse;
+use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::{SimConfig, simulate};
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let duration: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(600.0);
+    let mut seeds: Vec<u64> = args.filter_map(|a| a.parse().ok()).collect();
+    if seeds.is_empty() {
+        seeds = vec![21, 22, 23, 24];
+    }
+    let cases: [(&str, Option<(f64, Option<f64>)>); 4] = [
+        ("auto", None),
+        ("1.58 m, tau 60 s", Some((1.58, Some(60.0)))),
+        ("1.58 m, independent", Some((1.58, None))),
+        ("3 m, independent", Some((3.0, None))),
+    ];
+    for (label, noise) in cases {
+        let (mut inside, mut total) = (0usize, 0usize);
+        for &seed in &seeds {
+            let sim = simulate(&SimConfig {
+                seed,
+                duration_s: duration,
+                ..SimConfig::default()
+            })?;
+            let sig = Arc::new(Signals::from_owned_log(parse(
+                sim.log_csv.as_bytes(),
+                "cal",
+            )?)?);
+            let mut settings = FitSettings::default();
+            if let Some((sigma, tau)) = noise {
+                settings.auto_noise = AutoNoise::OFF;
+                settings.model.sigma_horizontal_m = sigma;
+                settings.model.gps_tau_s = tau;
+            }
+            let mut fit = Reconstruction::new(sig.clone(), settings)?;
+            fit.finish();
+            let path = fit.trajectory().p;
+            let Some(u) = fit.model().uncertainty(fit.params(), seed) else {
+                continue;
+            };
+            let truth = sim.truth_in(&sig.frame);
+            for j in (0..sig.len()).step_by(100) {
+                let (de, dn) = (path[j].x - truth[j].x, path[j].y - truth[j].y);
+                inside += usize::from(u.mahalanobis2(j, de, dn) <= 5.991);
+                total += 1;
+            }
+        }
+        println!(
+            "{label:>22}: {:.1} % of {total} rows inside the 95 % ellipse",
+            100.0 * inside as f64 / total.max(1) as f64
+        );
+    }
+    Ok(())
+}
