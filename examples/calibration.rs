@@ -11,6 +11,9 @@ use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, simulate};
 
+/// GPS sigma (m) and correlation time (s) given by hand.
+type Noise = (f64, Option<f64>);
+
 fn main() -> anyhow::Result<()> {
     let mut args = std::env::args().skip(1);
     let duration: f64 = args.next().and_then(|a| a.parse().ok()).unwrap_or(600.0);
@@ -18,7 +21,7 @@ fn main() -> anyhow::Result<()> {
     if seeds.is_empty() {
         seeds = vec![21, 22, 23, 24];
     }
-    let cases: [(&str, Option<(f64, Option<f64>)>); 4] = [
+    let cases: [(&str, Option<Noise>); 4] = [
         ("auto", None),
         ("1.58 m, tau 60 s", Some((1.58, Some(60.0)))),
         ("1.58 m, independent", Some((1.58, None))),
