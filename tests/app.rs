@@ -71,6 +71,20 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
     assert!(rms < 3.0, "GPS RMS {rms}");
     // The fit panel and the model history's row both show the fit RMS.
     assert_eq!(h.get_all_by_label(&format!("{rms:.3} m")).count(), 2);
+    // The finished fit says how sure it is: ellipses along the path, a band on
+    // the biases, every parameter with its sigma.
+    let snap = h.state().snapshot.as_ref().expect("snapshot");
+    let sigma = snap.sigma.as_ref().expect("a finished fit has its sigmas");
+    assert_eq!(sigma.path.len(), snap.path.len());
+    assert_eq!(sigma.segments.len(), snap.segments.len());
+    assert!(sigma.path.iter().all(|v| v[0] > 0.0 && v[1] > 0.0));
+    let gain = snap
+        .params
+        .iter()
+        .position(|p| p.1 == "gain")
+        .expect("gain");
+    let sd = sigma.params[gain].expect("the gain has a sigma");
+    h.get_by_label(&format!("{:.5} ± {sd:.5} ", snap.params[gain].2));
     // The GPS noise the ride prefers, with its range, in the settings panel.
     let noise = h
         .state()

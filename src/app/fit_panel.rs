@@ -87,10 +87,17 @@ impl GyropathApp {
                 .num_columns(3)
                 .striped(true)
                 .show(ui, |ui| {
-                    for (effect, name, value, unit) in &s.params {
+                    for (k, (effect, name, value, unit)) in s.params.iter().enumerate() {
                         ui.label(effect);
                         ui.label(name);
-                        ui.label(format!("{value:.5} {unit}"));
+                        let sigma = s
+                            .sigma
+                            .as_ref()
+                            .and_then(|u| u.params.get(k).copied().flatten());
+                        ui.label(match sigma {
+                            Some(sd) => format!("{value:.5} ± {sd:.5} {unit}"),
+                            None => format!("{value:.5} {unit}"),
+                        });
                         ui.end_row();
                     }
                 });

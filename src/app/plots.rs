@@ -10,12 +10,13 @@ use egui_plot::{
     GridInput, GridMark, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine,
 };
 
-use super::worker::{RideView, Snapshot};
+use super::worker::{RideView, SigmaView, Snapshot};
 use crate::optimisation::IterationReport;
 
 const GPS: Color32 = Color32::from_rgb(120, 160, 255);
 const PATH: Color32 = Color32::from_rgb(255, 200, 60);
 const OUTAGE: Color32 = Color32::from_rgb(255, 110, 200);
+const SIGMA: Color32 = Color32::from_rgba_premultiplied(150, 150, 150, 140);
 const AXES: [Color32; 3] = [
     Color32::from_rgb(240, 90, 90),
     Color32::from_rgb(90, 200, 110),
@@ -209,6 +210,9 @@ pub fn map_ui(
                     plot.line(Line::new(name, run).color(colour).width(2.0));
                 }
             }
+            if let Some(sigma) = &snap.sigma {
+                sigma_ellipses_ui(plot, snap, sigma);
+            }
             if let Some(t) = hover_t
                 && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
             {
@@ -231,6 +235,48 @@ pub fn map_ui(
                 }
             }
         });
+}
+
+/// How many 95 % ellipses the map draws along the path.
+const ELLIPSES: usize = 80;
+
+/// The path's 95 % ellipses (chi-square 5.99 with 2 degrees of freedom) at
+/// evenly spaced points: where they grow (outages, the ride's ends) the path
+/// is least sure.
+fn sigma_ellipses_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView) {
+    let n = snap.path.len().min(sigma.path.len());
+    let step = n.div_ceil(ELLIPSES).max(1);
+    for i in (0..n).step_by(step) {
+        let [ve, vn, c] = sigma.path[i];
+        let Some(loop_) = ellipse(snap.path[i][1], snap.path[i][2], ve, vn, c, 5.991) else {
+            continue;
+        };
+        plot.line(Line::new("95 % ellipse", loop_).color(SIGMA).width(1.0));
+    }
+}
+
+/// The ellipse `d^T C^-1 d = k` around `(x, y)` for the covariance
+/// `C = [[ve, c], [c, vn]]`, as a closed loop; `None` if `C` is not positive.
+pub fn ellipse(x: f64, y: f64, ve: f64, vn: f64, c: f64, k: f64) -> Option<Vec<[f64; 2]>> {
+    // Eigen-decomposition of the symmetric 2x2 matrix.
+    let mean = 0.5 * (ve + vn);
+    let d = (0.25 * (ve - vn).powi(2) + c * c).sqrt();
+    let (l1, l2) = (mean + d, mean - d);
+    if !(l1.is_finite() && l2 > 0.0) {
+        return None;
+    }
+    let angle = 0.5 * (2.0 * c).atan2(ve - vn);
+    let (a, b) = ((k * l1).sqrt(), (k * l2).sqrt());
+    let (sin, cos) = angle.sin_cos();
+    Some(
+        (0..=32)
+            .map(|i| {
+                let t = i as f64 / 32.0 * std::f64::consts::TAU;
+                let (u, v) = (a * t.cos(), b * t.sin());
+                [x + u * cos - v * sin, y + u * sin + v * cos]
+            })
+            .collect(),
+    )
 }
 
 /// The fit's progress per iteration, log scale: first the GPS RMS over the
@@ -492,6 +538,30 @@ pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32)
                 .collect();
             let pts = decimate(&pts, lo, hi, px);
             plot.line(Line::new(format!("bias {name}"), pts).color(AXES[a]));
+            // +- 1 sigma of each segment, once the fit is done.
+            let Some(sigma) = snap
+                .sigma
+                .as_ref()
+                .filter(|s| s.segments.len() == snap.segments.len())
+            else {
+                continue;
+            };
+            for side in [-1.0, 1.0] {
+                let band: Vec<[f64; 2]> = snap
+                    .segments
+                    .iter()
+                    .zip(&sigma.segments)
+                    .flat_map(|(s, sd)| {
+                        let v = s.bias_dps[a] + side * sd[a];
+                        [[s.t0 - t0, v], [s.t1 - t0, v]]
+                    })
+                    .collect();
+                plot.line(
+                    Line::new(format!("bias {name} ± 1σ"), decimate(&band, lo, hi, px))
+                        .color(AXES[a].gamma_multiply(0.5))
+                        .style(LineStyle::dashed_dense()),
+                );
+            }
         }
         hovered_time(plot, t0)
     });
@@ -615,6 +685,26 @@ fn hovered_time(plot: &egui_plot::PlotUi<'_>, t0: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn ellipses_have_the_covariance_axes() {
+        // Axis-aligned: semi-axes 2 sqrt(k) east, sqrt(k) north.
+        let e = ellipse(10.0, 20.0, 4.0, 1.0, 0.0, 9.0).unwrap();
+        let max_e = e.iter().map(|p| (p[0] - 10.0).abs()).fold(0.0, f64::max);
+        let max_n = e.iter().map(|p| (p[1] - 20.0).abs()).fold(0.0, f64::max);
+        assert!(
+            (max_e - 6.0).abs() < 1e-9 && (max_n - 3.0).abs() < 0.05,
+            "{max_e} {max_n}"
+        );
+        // Correlated: every point satisfies d^T C^-1 d = k.
+        let (ve, vn, c) = (2.0, 1.0, 0.8);
+        for p in ellipse(0.0, 0.0, ve, vn, c, 5.991).unwrap() {
+            let det = ve * vn - c * c;
+            let m = (vn * p[0] * p[0] - 2.0 * c * p[0] * p[1] + ve * p[1] * p[1]) / det;
+            assert!((m - 5.991).abs() < 1e-9, "{m}");
+        }
+        assert!(ellipse(0.0, 0.0, 1.0, 1.0, 2.0, 1.0).is_none());
+    }
 
     #[test]
     fn decimation_keeps_the_extremes_and_the_edges() {

@@ -135,6 +135,20 @@ pub struct Snapshot {
     pub violations: Vec<String>,
     /// The noise settings estimated from the ride, once the fit has them.
     pub noise: Option<crate::optimisation::NoiseEstimate>,
+    /// How sure the finished fit is (computed once the fit is done: 40
+    /// posterior sweeps of the ride are too many for every iteration).
+    pub sigma: Option<SigmaView>,
+}
+
+/// The finished fit's uncertainties, aligned with what the snapshot draws.
+#[derive(Clone, Debug, Default)]
+pub struct SigmaView {
+    /// Per path point: variance east, north (m^2) and their covariance.
+    pub path: Vec<[f64; 3]>,
+    /// Per segment: 1-sigma bias x, y, z (deg/s).
+    pub segments: Vec<[f64; 3]>,
+    /// Per entry of `Snapshot::params`: its 1-sigma.
+    pub params: Vec<Option<f64>>,
 }
 
 /// Worker -> UI.
@@ -535,6 +549,8 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
     rows.sort_unstable();
     rows.dedup();
     let sparse = model.sparse_path(theta, rows);
+    let segments = segment_biases(model, theta);
+    let segments_len = segments.len();
     let residuals = fix_residuals(model, theta, &sparse);
     let path = path_rows
         .iter()
@@ -543,6 +559,11 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
             [t[j], p.x, p.y]
         })
         .collect();
+    let done = fit.phase() == Phase::Done;
+    let u = done
+        .then(|| model.uncertainty_at(theta, crate::model::UNCERTAINTY_SEED, Some(&path_rows)))
+        .flatten();
+    let mut param_sigmas = Vec::new();
     let mut params = Vec::new();
     for (e, effect) in model.effects().iter().enumerate() {
         if effect.segment_edges().is_some() {
@@ -554,6 +575,10 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
             if effect.fixed(i) {
                 continue;
             }
+            param_sigmas
+                .push(u.as_ref().and_then(|u| {
+                    u.params[model.range(e).start + i].map(|s| s * info.scale.abs())
+                }));
             params.push((
                 effect.id(),
                 info.name.clone(),
@@ -569,7 +594,7 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
         path,
         residual_rms: ResidualRms::of(&residuals),
         residuals,
-        segments: segment_biases(model, theta),
+        segments,
         params,
         n_params: model.n_params(),
         effects: model.effect_ids(),
@@ -578,5 +603,32 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
             .map(ToString::to_string)
             .collect(),
         noise: fit.noise().cloned(),
+        sigma: u.map(|u| SigmaView {
+            path: u.path.iter().map(|v| [v[0], v[1], v[3]]).collect(),
+            segments: segment_sigmas(model, &u, segments_len),
+            params: param_sigmas,
+        }),
     }
+}
+
+/// 1-sigma of each segment bias (deg/s), if the model's segments are the snapshot's `n`.
+fn segment_sigmas(
+    model: &crate::model::Model,
+    u: &crate::model::Uncertainty,
+    n: usize,
+) -> Vec<[f64; 3]> {
+    let Some(e) = model.effect_index("gyro_bias_segments") else {
+        return Vec::new();
+    };
+    let r = model.range(e);
+    if r.len() != 3 * n {
+        return Vec::new();
+    }
+    (0..n)
+        .map(|s| {
+            [0, 1, 2].map(|a| {
+                u.params[r.start + 3 * s + a].map_or(f64::NAN, |v| v * crate::effects::DEG_PER_RAD)
+            })
+        })
+        .collect()
 }

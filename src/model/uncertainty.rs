@@ -84,6 +84,18 @@ impl Model {
     /// swept and compared with the fitted one. `None` for a model without
     /// segment biases (no chain) or when the solve fails.
     pub fn uncertainty(&self, theta: &[f64], seed: u64) -> Option<Uncertainty> {
+        self.uncertainty_at(theta, seed, None)
+    }
+
+    /// [`Self::uncertainty`] with the path's covariance kept only at `rows`
+    /// (sorted; `Uncertainty::path[i]` is then row `rows[i]`): what a view
+    /// that draws a few thousand points needs, without a long ride's every row.
+    pub fn uncertainty_at(
+        &self,
+        theta: &[f64],
+        seed: u64,
+        rows: Option<&[usize]>,
+    ) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let chain = self.chain_system(theta, &free)?;
         let draws = chain.posterior_draws(DRAWS, seed)?;
@@ -97,10 +109,17 @@ impl Model {
                 params[i] = Some(inflation * var.sqrt());
             }
         }
-        let n = self.signals.len();
-        let mut fitted = Vec::with_capacity(n);
-        self.sweep_from(theta, self.start_of_ride(theta), |_, _, p, _, _| {
-            fitted.push(*p)
+        let n = rows.map_or(self.signals.len(), |r| r.len());
+        // Index into the kept rows of log row `j`.
+        let slot = |j: usize| match rows {
+            None => Some(j),
+            Some(r) => r.binary_search(&j).ok(),
+        };
+        let mut fitted = vec![Vector3::zeros(); n];
+        self.sweep_from(theta, self.start_of_ride(theta), |j, _, p, _, _| {
+            if let Some(f) = slot(j).and_then(|i| fitted.get_mut(i)) {
+                *f = *p;
+            }
         });
         let mut path = vec![[0.0; 4]; n];
         let mut drawn = theta.to_vec();
@@ -109,7 +128,10 @@ impl Model {
                 drawn[i] = theta[i] + inflation * d[c];
             }
             self.sweep_from(&drawn, self.start_of_ride(&drawn), |j, _, p, _, _| {
-                if let (Some(acc), Some(f)) = (path.get_mut(j), fitted.get(j)) {
+                let Some(i) = slot(j) else {
+                    return;
+                };
+                if let (Some(acc), Some(f)) = (path.get_mut(i), fitted.get(i)) {
                     let e: Vector3<f64> = p - f;
                     acc[0] += e.x * e.x;
                     acc[1] += e.y * e.y;
