@@ -610,6 +610,10 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
     Ok(())
 }
 
+/// Differences of `-2 ln L` below this are no evidence for one segment
+/// length over another (a likelihood ratio of about 7).
+const SEGMENT_EVIDENCE: f64 = 4.0;
+
 fn print_summary(r: &FitReport) {
     println!(
         "ride      {} ({} rows, {:.0} s, {} GPS fixes)",
@@ -628,6 +632,25 @@ fn print_summary(r: &FitReport) {
             r.bias_walk
                 .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))
         ),
+    }
+    if let Some(&(best, _)) = r.segment_preference.iter().find(|v| v.1 == 0.0) {
+        let spread = r.segment_preference.iter().map(|v| v.1).fold(0.0, f64::max);
+        let lengths: Vec<String> = r
+            .segment_preference
+            .iter()
+            .map(|(s, d)| format!("{s} s {d:+.1}"))
+            .collect();
+        if spread < SEGMENT_EVIDENCE {
+            println!(
+                "segments  no length preferred ({}, -2 ln L): the bias walk sets the smoothing",
+                lengths.join(", ")
+            );
+        } else {
+            println!(
+                "segments  the ride prefers {best} s ({}, -2 ln L)",
+                lengths.join(", ")
+            );
+        }
     }
     println!(
         "iters     step 1: {}, step 2: {}",

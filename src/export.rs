@@ -187,6 +187,9 @@ pub struct FitReport {
     /// The noise settings the fit ran with (`settings.model` holds what was
     /// asked for): estimated from the ride, with their 1-sigma ranges, or set.
     pub noise: Option<crate::optimisation::NoiseEstimate>,
+    /// `-2 ln L` of other segment lengths (s) relative to the best (see
+    /// `optimisation::noise::segment_preference`); empty without segments.
+    pub segment_preference: Vec<(f64, f64)>,
     /// The effective GPS sigma (m), correlation time (s, `None`: independent fixes) and bias walk.
     pub gps_sigma_m: f64,
     pub gps_tau_s: Option<f64>,
@@ -232,6 +235,7 @@ impl FitReport {
             stats: fit.stats(),
             attitude: sig.attitude.describe(),
             noise: fit.noise().cloned(),
+            segment_preference: crate::optimisation::noise::segment_preference(model, fit.params()),
             gps_sigma_m: model.spec.sigma_horizontal_m,
             gps_tau_s: model.spec.gps_tau_s,
             bias_walk: model.spec.bias_walk_dps_sqrt_s,

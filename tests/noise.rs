@@ -259,3 +259,23 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
     eprintln!("pooled: {:.1} % inside the 95 % ellipse", 100.0 * share);
     assert!((0.85..=0.99).contains(&share), "{share}");
 }
+
+/// The segment length the data prefer: every length tried has a finite
+/// likelihood relative to the best, and on a ride whose bias walks as the
+/// prior says the lengths are within a few units of each other (the walk
+/// prior scales with the length, so it, not the length, sets the smoothing).
+#[test]
+fn segment_lengths_are_compared_by_their_likelihood() {
+    let (_, sig) = ride(4, 600.0, "open");
+    let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    fit.finish();
+    let pref = gyropath::optimisation::noise::segment_preference(fit.model(), fit.params());
+    eprintln!("{pref:?}");
+    assert_eq!(
+        pref.len(),
+        gyropath::optimisation::noise::SEGMENT_CHOICES.len()
+    );
+    assert!(pref.iter().all(|v| v.1.is_finite() && v.1 >= 0.0));
+    assert!(pref.iter().any(|v| v.1 == 0.0));
+    assert!(pref.iter().all(|v| v.1 < 10.0), "{pref:?}");
+}
