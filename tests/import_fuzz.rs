@@ -92,6 +92,28 @@ fn read_mcap(bytes: &[u8]) -> Result<usize, String> {
     Ok(log.len())
 }
 
+/// A corrupted zstd chunk whose header claims more bytes than its frame
+/// holds made the mcap crate's streaming decompression loop forever (found
+/// by `corrupt_bags_never_panic`); chunks are now decompressed here, into a
+/// buffer of the claimed size, and this is an error naming the file.
+#[test]
+fn a_chunk_shorter_than_its_header_says_is_an_error_not_a_hang() {
+    let mut m = mcap(false, true);
+    for (at, byte) in [
+        (1892878usize, 122u8),
+        (1223443, 17),
+        (171322, 5),
+        (1831985, 132),
+        (95748, 179),
+        (1529149, 91),
+    ] {
+        let k = at % m.len();
+        m[k] ^= byte | 1;
+    }
+    let e = read_mcap(&m).expect_err("corrupt");
+    assert!(e.contains("fuzz.mcap") && e.contains("chunk"), "{e}");
+}
+
 #[test]
 fn the_writers_make_bags_the_readers_read() {
     // 1199 IMU rows inside the odometer's span; the fixes fall on samples.

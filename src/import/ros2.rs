@@ -131,10 +131,45 @@ pub fn read_mcap(
         message: format!("not a readable MCAP file: {e}"),
     };
     let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_record_length_limit(MAX_RECORD),
+        LinearReaderOptions::default()
+            .with_record_length_limit(MAX_RECORD)
+            .with_emit_chunks(true),
     );
     let mut schemas: HashMap<u16, String> = HashMap::new();
     let mut channels: HashMap<u16, Channel> = HashMap::new();
+    let mut record = |opcode: u8, data: &[u8], rec: &mut Recording| -> Result<(), LoadError> {
+        match mcap::parse_record(opcode, data).map_err(|e| corrupt(&e))? {
+            mcap::records::Record::Schema { header, .. } => {
+                schemas.insert(header.id, header.name);
+            }
+            mcap::records::Record::Channel(c) => {
+                let type_name = schemas.get(&c.schema_id).cloned().unwrap_or_default();
+                rec.add_topic(&c.topic, &type_name);
+                channels.insert(
+                    c.id,
+                    Channel {
+                        topic: c.topic,
+                        type_name,
+                        cdr: c.message_encoding == "cdr",
+                    },
+                );
+            }
+            mcap::records::Record::Message { header, data } => {
+                let Some(c) = channels.get(&header.channel_id) else {
+                    return Err(corrupt(&format!(
+                        "a message on channel {}, which no channel record declares",
+                        header.channel_id
+                    )));
+                };
+                if c.cdr {
+                    let log_ns = i64::try_from(header.log_time).unwrap_or(i64::MAX);
+                    rec.push_cdr(&c.topic, &c.type_name, &data, log_ns, choice)?;
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    };
     while let Some(event) = reader.next_event() {
         match event.map_err(|e| corrupt(&e))? {
             LinearReadEvent::ReadRequest(need) => {
@@ -153,42 +188,81 @@ pub fn read_mcap(
                 };
                 reader.notify_read(n);
             }
-            LinearReadEvent::Record { data, opcode } => {
-                match mcap::parse_record(opcode, data).map_err(|e| corrupt(&e))? {
-                    mcap::records::Record::Schema { header, .. } => {
-                        schemas.insert(header.id, header.name);
+            LinearReadEvent::Record { data, opcode } if opcode == CHUNK_OPCODE => {
+                let chunk = match mcap::parse_record(opcode, data).map_err(|e| corrupt(&e))? {
+                    mcap::records::Record::Chunk { header, data } => {
+                        decompress_chunk(&header, &data).map_err(|e| corrupt(&e))?
                     }
-                    mcap::records::Record::Channel(c) => {
-                        let type_name = schemas.get(&c.schema_id).cloned().unwrap_or_default();
-                        rec.add_topic(&c.topic, &type_name);
-                        channels.insert(
-                            c.id,
-                            Channel {
-                                topic: c.topic,
-                                type_name,
-                                cdr: c.message_encoding == "cdr",
-                            },
-                        );
-                    }
-                    mcap::records::Record::Message { header, data } => {
-                        let Some(c) = channels.get(&header.channel_id) else {
-                            return Err(corrupt(&format!(
-                                "a message on channel {}, which no channel record declares",
-                                header.channel_id
-                            )));
-                        };
-                        if !c.cdr {
-                            continue;
-                        }
-                        let log_ns = i64::try_from(header.log_time).unwrap_or(i64::MAX);
-                        rec.push_cdr(&c.topic, &c.type_name, &data, log_ns, choice)?;
-                    }
-                    _ => {}
+                    _ => continue,
+                };
+                for (op, body) in chunk_records(&chunk).map_err(|e| corrupt(&e))? {
+                    record(op, body, rec)?;
                 }
             }
+            LinearReadEvent::Record { data, opcode } => record(opcode, data, rec)?,
         }
     }
     Ok(())
+}
+
+/// The MCAP chunk record's opcode.
+const CHUNK_OPCODE: u8 = 0x06;
+
+/// A chunk's records, decompressed into a buffer of exactly the size its
+/// header claims (never more than [`MAX_RECORD`]), its CRC checked when it
+/// has one.
+fn decompress_chunk(header: &mcap::records::ChunkHeader, data: &[u8]) -> Result<Vec<u8>, String> {
+    let size = usize::try_from(header.uncompressed_size)
+        .ok()
+        .filter(|&s| s <= MAX_RECORD)
+        .ok_or_else(|| format!("a chunk claims {} bytes", header.uncompressed_size))?;
+    let out = match header.compression.as_str() {
+        "" => data.to_vec(),
+        "zstd" => zstd::bulk::decompress(data, size).map_err(|e| format!("zstd chunk: {e}"))?,
+        "lz4" => {
+            let mut out = Vec::with_capacity(size);
+            let mut dec = lz4_flex::frame::FrameDecoder::new(data).take(size as u64 + 1);
+            dec.read_to_end(&mut out)
+                .map_err(|e| format!("lz4 chunk: {e}"))?;
+            out
+        }
+        other => {
+            return Err(format!(
+                "chunks compressed with '{other}' are not supported"
+            ));
+        }
+    };
+    if out.len() != size {
+        return Err(format!(
+            "a chunk holds {} bytes where its header says {size}",
+            out.len()
+        ));
+    }
+    if header.uncompressed_crc != 0 && crc32fast::hash(&out) != header.uncompressed_crc {
+        return Err("a chunk's CRC does not match its contents".into());
+    }
+    Ok(out)
+}
+
+/// The `(opcode, body)` records of a decompressed chunk (opcode u8, length
+/// u64 little-endian, body), bounds-checked.
+fn chunk_records(mut bytes: &[u8]) -> Result<Vec<(u8, &[u8])>, String> {
+    let mut out = Vec::new();
+    while !bytes.is_empty() {
+        if bytes.len() < 9 {
+            return Err("a record inside a chunk is cut short".into());
+        }
+        let op = bytes[0];
+        let mut len = [0u8; 8];
+        len.copy_from_slice(&bytes[1..9]);
+        let len = usize::try_from(u64::from_le_bytes(len))
+            .ok()
+            .filter(|&l| l <= bytes.len() - 9)
+            .ok_or("a record inside a chunk runs past its end")?;
+        out.push((op, &bytes[9..9 + len]));
+        bytes = &bytes[9 + len..];
+    }
+    Ok(out)
 }
 
 /// Writes small MCAP files of CDR messages (for tests and benchmarks).
