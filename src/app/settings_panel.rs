@@ -114,15 +114,11 @@ impl GyropathApp {
                     ui.label("GPS sigma");
                     ui.label(n.gps_sigma_m.describe("m", 2));
                     ui.end_row();
-                    ui.label("correlated over");
-                    ui.label(if n.gps_tau_s.value > 0.0 {
-                        n.gps_tau_s.describe("s", 0)
-                    } else {
-                        "independent fixes (set)".to_string()
-                    });
+                    ui.label("GPS error");
+                    ui.label(n.tau_text());
                     ui.end_row();
                     ui.label("bias walk");
-                    ui.label(n.bias_walk.describe("°/s/√s", 4));
+                    ui.label(n.walk_text("°/s/√s"));
                     ui.end_row();
                 });
         }

@@ -391,7 +391,6 @@ impl Reconstruction {
         self.phase == Phase::Done
     }
 
-    /// Iterations spent in step 1 and step 2.
     /// The fitted model and its parameters.
     pub fn into_parts(self) -> (Model, Vec<f64>) {
         (self.model, self.theta)
@@ -402,6 +401,7 @@ impl Reconstruction {
         self.noise.as_ref()
     }
 
+    /// Iterations spent in step 1 and step 2.
     pub fn phase_iterations(&self) -> [usize; 2] {
         self.phase_iterations
     }
@@ -620,23 +620,13 @@ impl Reconstruction {
             && crate::diagnosis::limits::check(&self.model, &self.theta).is_empty()
     }
 
-    /// The spec the fit runs: the settings' model with the estimated noise
-    /// in place of the settings the estimate covers.
-    fn effective_spec(&self, spec: &ModelSpec) -> ModelSpec {
-        let (Some(n), auto) = (&self.noise, self.settings.auto_noise) else {
-            return spec.clone();
-        };
-        let mut out = spec.clone();
-        let estimated = n.apply(spec);
-        if auto.gps {
-            out.sigma_horizontal_m = estimated.sigma_horizontal_m;
-            out.sigma_vertical_m = estimated.sigma_vertical_m;
-            out.gps_tau_s = estimated.gps_tau_s;
+    /// The spec the fit runs: `spec` with the estimated noise in place of
+    /// the settings `auto` covers.
+    fn effective_spec(&self, spec: &ModelSpec, auto: AutoNoise) -> ModelSpec {
+        match &self.noise {
+            Some(n) => n.apply(spec, auto),
+            None => spec.clone(),
         }
-        if auto.walk {
-            out.bias_walk_dps_sqrt_s = estimated.bias_walk_dps_sqrt_s;
-        }
-        out
     }
 
     /// The noise phase's one iteration: search the likelihood, rebuild the
@@ -658,7 +648,7 @@ impl Reconstruction {
         };
         if let Some(n) = found {
             self.noise = Some(n);
-            let spec = self.effective_spec(&self.settings.model);
+            let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
             if let Ok(model) =
                 Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
             {
@@ -739,9 +729,7 @@ impl Reconstruction {
             if effects_changed || new.model.segment_s != self.settings.model.segment_s {
                 self.noise_done = !new.auto_noise.any();
             }
-            let old = std::mem::replace(&mut self.settings.auto_noise, new.auto_noise);
-            let spec = self.effective_spec(&new.model);
-            self.settings.auto_noise = old;
+            let spec = self.effective_spec(&new.model, new.auto_noise);
             let model =
                 Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())?;
             check_observability(&model)?;

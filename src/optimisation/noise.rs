@@ -118,29 +118,41 @@ pub struct NoiseEstimate {
 }
 
 impl NoiseEstimate {
-    /// The model spec with these settings.
-    pub fn apply(&self, spec: &ModelSpec) -> ModelSpec {
-        let ratio = spec.sigma_vertical_m / spec.sigma_horizontal_m;
-        ModelSpec {
-            sigma_horizontal_m: self.gps_sigma_m.value,
-            sigma_vertical_m: self.gps_sigma_m.value * ratio,
-            gps_tau_s: Some(self.gps_tau_s.value),
-            bias_walk_dps_sqrt_s: Some(self.bias_walk.value),
-            ..spec.clone()
+    /// `spec` with the settings of `which` replaced by these.
+    pub fn apply(&self, spec: &ModelSpec, which: AutoNoise) -> ModelSpec {
+        let x = [
+            self.gps_sigma_m.value,
+            self.gps_tau_s.value,
+            self.bias_walk.value,
+        ];
+        spec_at(spec, x.map(f64::ln), which)
+    }
+
+    /// The GPS error's correlation in words: "correlated over 3 s (2-4)", or independent fixes.
+    pub fn tau_text(&self) -> String {
+        if self.gps_tau_s.value > 0.0 {
+            format!("correlated over {}", self.gps_tau_s.describe("s", 0))
+        } else {
+            "independent fixes (set)".to_string()
+        }
+    }
+
+    /// The bias walk in words, or no prior.
+    pub fn walk_text(&self, unit: &str) -> String {
+        if self.bias_walk.value > 0.0 {
+            self.bias_walk.describe(unit, 4)
+        } else {
+            "no prior (set)".to_string()
         }
     }
 
     /// One line for a summary.
     pub fn describe(&self) -> String {
-        let tau = if self.gps_tau_s.value > 0.0 {
-            format!("correlated over {}", self.gps_tau_s.describe("s", 0))
-        } else {
-            "independent fixes (set)".to_string()
-        };
         format!(
-            "GPS sigma {}, {tau}, bias walk {}",
+            "GPS sigma {}, {}, bias walk {}",
             self.gps_sigma_m.describe("m", 2),
-            self.bias_walk.describe("deg/s/sqrt(s)", 4)
+            self.tau_text(),
+            self.walk_text("deg/s/sqrt(s)")
         )
     }
 }
@@ -177,15 +189,21 @@ fn clamp(x: [f64; 3]) -> [f64; 3] {
     y
 }
 
-fn spec_at(spec: &ModelSpec, x: [f64; 3]) -> ModelSpec {
-    let ratio = spec.sigma_vertical_m / spec.sigma_horizontal_m;
-    ModelSpec {
-        sigma_horizontal_m: x[0].exp(),
-        sigma_vertical_m: x[0].exp() * ratio,
-        gps_tau_s: Some(x[1].exp()),
-        bias_walk_dps_sqrt_s: Some(x[2].exp()),
-        ..spec.clone()
+/// `spec` with the settings `which` covers taken from the log-space point
+/// `x` (sigma, tau, walk); the others stay as set (independent fixes, no
+/// prior), so the likelihood is that of the model the fit will run.
+fn spec_at(spec: &ModelSpec, x: [f64; 3], which: AutoNoise) -> ModelSpec {
+    let mut out = spec.clone();
+    if which.gps {
+        let ratio = spec.sigma_vertical_m / spec.sigma_horizontal_m;
+        out.sigma_horizontal_m = x[0].exp();
+        out.sigma_vertical_m = x[0].exp() * ratio;
+        out.gps_tau_s = Some(x[1].exp());
     }
+    if which.walk {
+        out.bias_walk_dps_sqrt_s = Some(x[2].exp());
+    }
+    out
 }
 
 /// `-2 ln L` of `spec` linearised at `theta` over the `free` parameters
@@ -232,7 +250,7 @@ pub fn estimate(
             x[d] = v;
         }
         evaluations += 1;
-        neg2_log_likelihood(model, &base, theta, free, &spec_at(spec, clamp(x))).map_or(
+        neg2_log_likelihood(model, &base, theta, free, &spec_at(spec, clamp(x), which)).map_or(
             f64::INFINITY,
             |v| {
                 // Outside the bounds: the clamped value plus a wall, so the simplex turns back.
@@ -269,21 +287,22 @@ pub fn estimate(
                 estimated: true,
             }
         }
-        None => Estimated::held(x[d].exp()),
+        // As set (0: independent fixes, no prior).
+        None => Estimated::held(
+            [
+                spec.sigma_horizontal_m,
+                spec.gps_tau_s.unwrap_or(0.0),
+                spec.bias_walk_dps_sqrt_s.unwrap_or(0.0),
+            ][d],
+        ),
     };
-    let mut out = NoiseEstimate {
+    Some(NoiseEstimate {
         gps_sigma_m: est(0),
         gps_tau_s: est(1),
         bias_walk: est(2),
         neg2_log_likelihood: value,
-        evaluations: 0,
-    };
-    if !which.gps && spec.gps_tau_s.is_none() {
-        // Independent fixes as set: no correlation time to report.
-        out.gps_tau_s = Estimated::held(0.0);
-    }
-    out.evaluations = evaluations;
-    Some(out)
+        evaluations,
+    })
 }
 
 /// Segment lengths (s) whose likelihood [`segment_preference`] compares.
