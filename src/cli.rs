@@ -432,8 +432,11 @@ pub fn fit(args: &FitArgs) -> Result<()> {
                 .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED)
         })
         .flatten();
-    let report = FitReport::new(&fit, started.elapsed().as_secs_f64())
-        .with_uncertainty(fit.model(), uncertainty.as_ref());
+    let elapsed = started.elapsed().as_secs_f64();
+    let report = match &uncertainty {
+        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
+        None => FitReport::new(&fit, elapsed),
+    };
     if let Some(out) = &args.out {
         write_atomically(out, Some(ride), |w| {
             write_path_csv(w, fit.model(), fit.params(), uncertainty.as_ref())
@@ -517,8 +520,11 @@ fn fit_one(
     let uncertainty = fit
         .model()
         .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED);
-    let report = FitReport::new(&fit, started.elapsed().as_secs_f64())
-        .with_uncertainty(fit.model(), uncertainty.as_ref());
+    let elapsed = started.elapsed().as_secs_f64();
+    let report = match &uncertainty {
+        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
+        None => FitReport::new(&fit, elapsed),
+    };
     let stem = ride
         .file_stem()
         .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned());

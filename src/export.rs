@@ -201,12 +201,23 @@ pub struct FitReport {
 }
 
 impl FitReport {
+    /// The report of `fit`, with the sigmas of its global parameters.
     pub fn new(fit: &Reconstruction, elapsed_s: f64) -> Self {
+        Self::with_sigmas(fit, elapsed_s, fit.model().parameter_sigmas(fit.params()))
+    }
+
+    /// The report with the sigmas of `u` (those of the segment biases too,
+    /// from posterior draws, see [`Model::uncertainty`]).
+    pub fn with_uncertainty(fit: &Reconstruction, elapsed_s: f64, u: &Uncertainty) -> Self {
+        Self::with_sigmas(fit, elapsed_s, u.params.clone())
+    }
+
+    /// `sigmas`: per parameter, internal units.
+    fn with_sigmas(fit: &Reconstruction, elapsed_s: f64, sigmas: Vec<Option<f64>>) -> Self {
         let model = fit.model();
         let sig = &model.signals;
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
         let fixed = model.fixed_mask();
-        let sigmas = model.parameter_sigmas(fit.params());
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -243,29 +254,6 @@ impl FitReport {
             warnings: sig.warnings.clone(),
             elapsed_s,
         }
-    }
-
-    /// The report with the sigma of every parameter that `u` has one for and
-    /// the report has not (the segment biases: from posterior draws, see
-    /// [`Model::uncertainty`]); `model` is the fit's.
-    pub fn with_uncertainty(mut self, model: &Model, u: Option<&Uncertainty>) -> Self {
-        let Some(u) = u else {
-            return self;
-        };
-        let mut next: BTreeMap<String, usize> = BTreeMap::new();
-        for ((effect, info), sigma) in model.param_infos().into_iter().zip(&u.params) {
-            let k = next.entry(effect.clone()).or_default();
-            if let (Some(v), Some(s)) = (
-                self.parameters.get_mut(&effect).and_then(|v| v.get_mut(*k)),
-                sigma,
-            ) && v.sigma.is_none()
-                && !v.fixed
-            {
-                v.sigma = Some(s * info.scale.abs());
-            }
-            *k += 1;
-        }
-        self
     }
 
     /// A parameter's shown value by effect id and name.

@@ -65,6 +65,15 @@ pub struct ChainSystem {
     prior_rows: Vec<Vec<(usize, f64)>>,
 }
 
+/// The posterior of the free parameters (see [`ChainSystem::posterior`]).
+pub struct Posterior {
+    /// Parameter index of each row of `global_cov`.
+    pub globals: Vec<usize>,
+    pub global_cov: DMatrix<f64>,
+    /// Deviations of the free parameters, one entry per free column.
+    pub draws: Vec<DVector<f64>>,
+}
+
 /// What a solve finds: the step, `ln det` of the information matrix, and
 /// the final triangle's block of the global columns (scaled unknowns).
 struct Solved {
@@ -297,11 +306,9 @@ impl ChainSystem {
         let no = lin.r.len();
         let prev_of = |o: usize| lin.prev[o].filter(|_| lin.slope[o].1 != 0.0);
         for (g, &i) in lin.globals.iter().enumerate() {
-            diag[pos[i]] = (0..no)
-                .map(|o| {
-                    let (m, n) = lin.slope[o];
-                    m * lin.jg[(o, g)] + prev_of(o).map_or(0.0, |j| n * lin.jg[(j, g)])
-                })
+            diag[pos[i]] = lin
+                .combine(lin.jg.column(g).as_slice())
+                .iter()
                 .map(|v| v * v)
                 .sum();
         }
@@ -427,27 +434,41 @@ impl ChainSystem {
         self.run(lambda).map(|s| (s.delta, s.log_det))
     }
 
-    /// The covariance of the global parameters under the fit's own noise
-    /// model, `[(J^T J + J_p^T J_p)^-1]_GG`: the globals are the array's last
-    /// columns, so after the forward pass (every block eliminated by QR, i.e.
-    /// marginalised exactly) their information is `R_GG^T R_GG` of the final
-    /// triangle, and no dense inverse of the whole system is formed. Returns
-    /// the parameter index of each row and the matrix.
-    pub fn global_covariance(&self) -> Option<(Vec<usize>, DMatrix<f64>)> {
+    /// The posterior of the free parameters under the fit's own noise model
+    /// (`N(theta, (J^T J + J_p^T J_p)^-1)`), from one forward pass at zero
+    /// damping, never a dense inverse:
+    /// - the global parameters' covariance exactly: they are the array's last
+    ///   columns, so after the forward pass (every block eliminated by QR, i.e.
+    ///   marginalised exactly) their information is `R_GG^T R_GG` of the final
+    ///   triangle;
+    /// - `draws` draws of the deviation of every free parameter (one entry per
+    ///   free column): back-substitution with standard normal right-hand
+    ///   sides, `R^-1 xi`, O(N + S) each. What the marginal sigmas of the
+    ///   segment biases and of the path are estimated from.
+    pub fn posterior(&self, draws: usize, seed: u64) -> Option<Posterior> {
         let solved = self.run(0.0)?;
         let ng = solved.r_globals.nrows();
         let inv = solved
             .r_globals
             .solve_upper_triangular(&DMatrix::identity(ng, ng))?;
-        let mut cov = &inv * inv.transpose();
+        let mut global_cov = &inv * inv.transpose();
         for (a, &ia) in self.lin.globals.iter().enumerate() {
             for (b, &ib) in self.lin.globals.iter().enumerate() {
-                cov[(a, b)] /= (self.diag[self.pos[ia]] * self.diag[self.pos[ib]]).sqrt();
+                global_cov[(a, b)] /= (self.diag[self.pos[ia]] * self.diag[self.pos[ib]]).sqrt();
             }
         }
-        cov.iter()
-            .all(|v| v.is_finite())
-            .then(|| (self.lin.globals.clone(), cov))
+        if !global_cov.iter().all(|v| v.is_finite()) {
+            return None;
+        }
+        let mut rng = Rng::new(seed);
+        let draws = (0..draws)
+            .map(|_| self.backward(&solved.forward, Some(&mut rng)))
+            .collect::<Option<Vec<_>>>()?;
+        Some(Posterior {
+            globals: self.lin.globals.clone(),
+            global_cov,
+            draws,
+        })
     }
 
     /// The forward pass and the backward pass (see the module docs).
@@ -664,7 +685,7 @@ impl ChainSystem {
     /// With `noise` the right-hand sides are standard normal draws instead of
     /// the array's `z`: the result is then a draw of the posterior deviation
     /// `R^-1 xi`, whose covariance is `(R^T R)^-1`, the posterior covariance
-    /// (at the forward pass's damping; 0 for [`Self::posterior_draws`]).
+    /// (at the forward pass's damping; 0 for [`Self::posterior`]).
     fn backward(&self, f: &Forward, mut noise: Option<&mut Rng>) -> Option<DVector<f64>> {
         let lin = &self.lin;
         let blocks = &lin.blocks;
@@ -731,19 +752,6 @@ impl ChainSystem {
             delta[c] = xg[g] / f.scale[c];
         }
         delta.iter().all(|v| v.is_finite()).then_some(delta)
-    }
-
-    /// `k` draws of the posterior deviation of the free parameters
-    /// (`N(0, (J^T J + J_p^T J_p)^-1)`, one entry per free column), from one
-    /// forward pass and `k` backward passes with random right-hand sides:
-    /// O(N + k S) and never a dense inverse. What the marginal sigmas of the
-    /// segment biases and of the path are estimated from.
-    pub fn posterior_draws(&self, k: usize, seed: u64) -> Option<Vec<DVector<f64>>> {
-        let solved = self.run(0.0)?;
-        let mut rng = Rng::new(seed);
-        (0..k)
-            .map(|_| self.backward(&solved.forward, Some(&mut rng)))
-            .collect()
     }
 
     /// Prior rows of stage `stage` into the array, in scaled unknowns.

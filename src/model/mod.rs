@@ -27,7 +27,7 @@ mod start;
 mod sweep;
 mod uncertainty;
 
-pub use chain::ChainSystem;
+pub use chain::{ChainSystem, Posterior};
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;

@@ -334,12 +334,11 @@ impl ChainLinearisation {
 
     /// `J^T J` and `J^T r` assembled densely from the moments (O(N + P^2)),
     /// for uncoupled rows (each row is `slope_o` times its observation's).
-    fn normal_equations(&self, np: usize) -> NormalEquations {
-        let mut scaled = self.clone();
+    fn normal_equations(mut self, np: usize) -> NormalEquations {
         for (o, &(m, _)) in self.slope.iter().enumerate() {
-            scaled.h[o] *= m;
-            scaled.jg.row_mut(o).scale_mut(m);
-            for v in &mut scaled.jb[o].1 {
+            self.h[o] *= m;
+            self.jg.row_mut(o).scale_mut(m);
+            for v in &mut self.jb[o].1 {
                 *v *= m;
             }
         }
@@ -355,7 +354,7 @@ impl ChainLinearisation {
             r,
             prior,
             ..
-        } = &scaled;
+        } = &self;
         let no = r.len();
         let ng = globals.len();
         // Suffix moments after each block: first observation past its last step.

@@ -3,16 +3,16 @@
 //! priors), from the linearisation at the fitted parameters.
 //!
 //! `Cov(theta) = (J^T J + J_p^T J_p)^-1` with `J` the Jacobian of the whitened
-//! residuals: with the noise settings estimated from the ride the whitened
-//! residuals have unit variance, so no residual-based rescaling is applied (it
-//! would count correlated GPS error as information twice over). The global
-//! parameters' block comes from the O(N) chain solver's final triangle
-//! ([`super::ChainSystem::global_covariance`]); a model without segment
-//! biases is small enough for the dense normal equations.
+//! residuals, widened by what correlation the whitened residuals still show
+//! ([`Model::residual_inflation`]). The global parameters' block comes exactly
+//! from the O(N) chain solver's final triangle, the segment biases' and the
+//! path's from posterior draws of the same factorisation
+//! ([`super::ChainSystem::posterior`]); a model without segment biases is
+//! small enough for the dense normal equations.
 
 use nalgebra::{DVector, Vector3};
 
-use super::Model;
+use super::{Model, Posterior};
 use crate::effects::Role;
 use crate::optimisation::lm::damped_solve;
 
@@ -55,25 +55,41 @@ impl Uncertainty {
 impl Model {
     /// The 1-sigma uncertainty of every parameter at `theta` (internal units)
     /// that step 2 fits; `None` for parameters held fixed, for the constant
-    /// bias (step 2 leaves it to the segments: the two are one direction) and,
-    /// for now, for the segment biases.
+    /// bias (step 2 leaves it to the segments: the two are one direction) and
+    /// for the segment biases (their sigmas need posterior draws, see
+    /// [`Self::uncertainty`]).
     pub fn parameter_sigmas(&self, theta: &[f64]) -> Vec<Option<f64>> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-        let mut out = vec![None; self.n_params()];
         let inflation = self.residual_inflation(theta);
         if let Some(chain) = self.chain_system(theta, &free) {
-            if let Some((params, cov)) = chain.global_covariance() {
-                for (a, &i) in params.iter().enumerate() {
-                    out[i] = Some(inflation * cov[(a, a)].max(0.0).sqrt());
-                }
-            }
-            return out;
+            return chain.posterior(0, UNCERTAINTY_SEED).map_or_else(
+                || vec![None; self.n_params()],
+                |p| self.sigmas_of(&p, chain.columns(), inflation),
+            );
         }
+        let mut out = vec![None; self.n_params()];
         let ne = self.normal_equations(theta, &free);
         for (c, &i) in ne.columns.iter().enumerate() {
             let mut unit = DVector::zeros(ne.columns.len());
             unit[c] = 1.0;
             out[i] = damped_solve(&ne.a, &unit, 0.0).map(|x| inflation * x[c].max(0.0).sqrt());
+        }
+        out
+    }
+
+    /// Per parameter: the exact sigma of a global one, the draws' root mean
+    /// square of any other free column (`columns`), widened by `inflation`.
+    fn sigmas_of(&self, p: &Posterior, columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
+        let mut out = vec![None; self.n_params()];
+        let k = p.draws.len() as f64;
+        if k > 0.0 {
+            for (c, &i) in columns.iter().enumerate() {
+                let var = p.draws.iter().map(|d| d[c] * d[c]).sum::<f64>() / k;
+                out[i] = Some(inflation * var.sqrt());
+            }
+        }
+        for (a, &i) in p.globals.iter().enumerate() {
+            out[i] = Some(inflation * p.global_cov[(a, a)].max(0.0).sqrt());
         }
         out
     }
@@ -98,17 +114,12 @@ impl Model {
     ) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let chain = self.chain_system(theta, &free)?;
-        let draws = chain.posterior_draws(DRAWS, seed)?;
+        let posterior = chain.posterior(DRAWS, seed)?;
         let inflation = self.residual_inflation(theta);
-        let columns = chain.columns().to_vec();
-        let mut params = self.parameter_sigmas(theta);
+        let columns = chain.columns();
+        let params = self.sigmas_of(&posterior, columns, inflation);
+        let draws = &posterior.draws;
         let k = draws.len() as f64;
-        for (c, &i) in columns.iter().enumerate() {
-            if params[i].is_none() {
-                let var = draws.iter().map(|d| d[c] * d[c]).sum::<f64>() / k;
-                params[i] = Some(inflation * var.sqrt());
-            }
-        }
         let n = rows.map_or(self.signals.len(), |r| r.len());
         // Index into the kept rows of log row `j`.
         let slot = |j: usize| match rows {
@@ -123,7 +134,7 @@ impl Model {
         });
         let mut path = vec![[0.0; 4]; n];
         let mut drawn = theta.to_vec();
-        for d in &draws {
+        for d in draws {
             for (c, &i) in columns.iter().enumerate() {
                 drawn[i] = theta[i] + inflation * d[c];
             }
