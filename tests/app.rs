@@ -85,6 +85,20 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .expect("gain");
     let sd = sigma.params[gain].expect("the gain has a sigma");
     h.get_by_label(&format!("{:.5} ± {sd:.5} ", snap.params[gain].2));
+    // Residuals in sigmas of the noise model, with how they spread against N(0, 1).
+    let spread = gyropath::diagnosis::NormalisedSpread::of(&snap.residuals);
+    assert!((0.7..1.4).contains(&spread.rms), "{spread:?}");
+    let check = "residuals in sigmas of the noise model";
+    // Below the fold of the controls panel: scrolled to, as a user would.
+    h.get_by_label(check).scroll_to_me();
+    h.run();
+    h.get_by_label(check).click();
+    h.run();
+    assert!(h.state().settings.normalised_residuals);
+    h.get_by_label_contains(&format!(
+        "Residuals in sigmas: RMS {:.2} (1 expected)",
+        spread.rms
+    ));
     // The GPS noise the ride prefers, with its range, in the settings panel.
     let noise = h
         .state()

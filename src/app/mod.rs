@@ -51,6 +51,8 @@ pub struct AppSettings {
     pub fit: FitSettings,
     pub recent: Vec<PathBuf>,
     pub colour_by_residual: bool,
+    /// Residual plot in sigmas of the noise model instead of metres.
+    pub normalised_residuals: bool,
     /// Start fitting as soon as a ride is loaded.
     pub auto_run: bool,
 }
@@ -61,6 +63,7 @@ impl Default for AppSettings {
             fit: FitSettings::default(),
             recent: Vec::new(),
             colour_by_residual: false,
+            normalised_residuals: false,
             auto_run: true,
         }
     }

@@ -7,10 +7,12 @@
 
 use egui::{Color32, Id};
 use egui_plot::{
-    GridInput, GridMark, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points, VLine,
+    GridInput, GridMark, HLine, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points,
+    VLine,
 };
 
 use super::worker::{RideView, SigmaView, Snapshot};
+use crate::diagnosis::FixResidual;
 use crate::optimisation::IterationReport;
 
 const GPS: Color32 = Color32::from_rgb(120, 160, 255);
@@ -467,8 +469,19 @@ impl super::GyropathApp {
                 cost_ui(ui, snap, h);
                 ui.label("Gyro bias per segment");
                 hover = hover.or(bias_ui(ui, ride, snap, h).0);
-                ui.label("Residuals at GPS fixes");
-                hover = hover.or(residuals_ui(ui, ride, snap, h).0);
+                if self.settings.normalised_residuals {
+                    let spread = crate::diagnosis::NormalisedSpread::of(&snap.residuals);
+                    ui.label(format!(
+                        "Residuals in sigmas: RMS {:.2} (1 expected), {:.1} % beyond ±2 ({:.1} % expected)",
+                        spread.rms,
+                        100.0 * spread.beyond_2,
+                        100.0 * crate::diagnosis::NormalisedSpread::EXPECTED_BEYOND_2
+                    ));
+                    hover = hover.or(normalised_residuals_ui(ui, ride, snap, h).0);
+                } else {
+                    ui.label("Residuals at GPS fixes");
+                    hover = hover.or(residuals_ui(ui, ride, snap, h).0);
+                }
             });
         });
         self.hover_t = hover;
@@ -570,31 +583,92 @@ pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32)
 
 /// Residuals at the GPS fixes: along-track, cross-track, vertical.
 pub fn residuals_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32) -> TimeHover {
+    let series: [ResidualSeries; 3] = [
+        ("along-track", &|r| Some(r.along)),
+        ("cross-track", &|r| Some(r.cross)),
+        ("vertical", &|r| r.up),
+    ];
+    fix_series_ui(
+        ui,
+        ride,
+        snap,
+        height,
+        "residuals",
+        "fix - path (m)",
+        &series,
+        None,
+    )
+}
+
+/// Residuals in sigmas of the fit's noise model (along- and cross-track),
+/// with the +-2 band that holds about 95 % of them under a right model.
+pub fn normalised_residuals_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: &Snapshot,
+    height: f32,
+) -> TimeHover {
+    let series: [ResidualSeries; 2] = [
+        ("along-track", &|r| Some(r.normalised[0])),
+        ("cross-track", &|r| Some(r.normalised[1])),
+    ];
+    fix_series_ui(
+        ui,
+        ride,
+        snap,
+        height,
+        "normalised residuals",
+        "(fix - path) / sigma",
+        &series,
+        Some(2.0),
+    )
+}
+
+/// A named quantity of each fix residual (`None`: the fix has none).
+type ResidualSeries<'a> = (&'a str, &'a dyn Fn(&FixResidual) -> Option<f64>);
+
+/// Quantities of the fix residuals over time, one line per stretch of
+/// consecutive fixes so outages stay gaps, coloured as the axes are, with
+/// horizontal lines at `+-band` when given.
+#[allow(clippy::too_many_arguments)]
+fn fix_series_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: &Snapshot,
+    height: f32,
+    id: &str,
+    y_label: &str,
+    series: &[ResidualSeries],
+    band: Option<f64>,
+) -> TimeHover {
     let t0 = ride.t0;
-    let r = time_plot("residuals", height, "fix - path (m)").show(ui, |plot| {
+    let r = time_plot(id, height, y_label).show(ui, |plot| {
         let res = &snap.residuals;
         let (lo, hi, px) = view(plot);
-        // One line per stretch of consecutive fixes, so outages stay gaps.
         let mut start = 0;
         while start < res.len() {
             let end = (start + 1..res.len())
                 .find(|&k| res[k].t - res[k - 1].t > 2.5)
                 .unwrap_or(res.len());
-            let run = &res[start..end];
-            let series = |f: &dyn Fn(&crate::diagnosis::FixResidual) -> Option<f64>| {
-                let pts: Vec<[f64; 2]> = run
+            for (i, (name, f)) in series.iter().enumerate() {
+                let pts: Vec<[f64; 2]> = res[start..end]
                     .iter()
                     .filter_map(|r| f(r).map(|v| [r.t - t0, v]))
                     .collect();
-                decimate(&pts, lo, hi, px)
-            };
-            plot.line(Line::new("along-track", series(&|r| Some(r.along))).color(AXES[0]));
-            plot.line(Line::new("cross-track", series(&|r| Some(r.cross))).color(AXES[1]));
-            let up = series(&|r| r.up);
-            if !up.is_empty() {
-                plot.line(Line::new("vertical", up).color(AXES[2]));
+                if !pts.is_empty() {
+                    plot.line(Line::new(*name, decimate(&pts, lo, hi, px)).color(AXES[i]));
+                }
             }
             start = end;
+        }
+        if let Some(b) = band {
+            for y in [-b, b] {
+                plot.hline(
+                    HLine::new(format!("±{b} σ"), y)
+                        .color(egui::Color32::GRAY)
+                        .style(LineStyle::dashed_loose()),
+                );
+            }
         }
         for &(a, b) in &ride.outages {
             plot.vline(VLine::new("GPS outage", a - t0).color(OUTAGE));

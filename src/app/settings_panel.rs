@@ -132,5 +132,14 @@ impl GyropathApp {
             &mut self.settings.colour_by_residual,
             "colour path by residual",
         );
+        ui.checkbox(
+            &mut self.settings.normalised_residuals,
+            "residuals in sigmas of the noise model",
+        )
+        .on_hover_text(
+            "Each fix's residual divided by what the GPS noise model expects there \
+             (given the fix before, when the noise is correlated): under a right model \
+             about 1 in 22 lies beyond ±2",
+        );
     }
 }

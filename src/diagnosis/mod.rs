@@ -9,7 +9,7 @@ pub mod validation;
 pub mod whiteness;
 
 pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
-pub use residuals::{FixResidual, ResidualRms, fix_residuals, rms_per_minute};
+pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
 pub use validation::{Folds, HeldOut, held_out};
 pub use whiteness::{Whiteness, whiteness};

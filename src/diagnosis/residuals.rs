@@ -33,6 +33,13 @@ pub struct FixResidual {
     pub up: Option<f64>,
     /// Model speed at the fix (m/s), for relating residuals to motion.
     pub speed: f64,
+    /// Along- and cross-track residuals normalised by the fit's noise model:
+    /// the whitened east and north innovations `-e'` (see `model::noise`:
+    /// fix minus path in sigmas of what the model expects at this fix given
+    /// the one before), turned into the direction of travel like `along` and
+    /// `cross`. Under a right model they are independent N(0, 1) (a rotation
+    /// keeps that): about 4.6 % beyond 2.
+    pub normalised: [f64; 2],
 }
 
 impl FixResidual {
@@ -54,13 +61,17 @@ pub fn fix_residuals(model: &Model, theta: &[f64], traj: &impl PathAt) -> Vec<Fi
     let mut k = 0;
     for fix in &sig.fixes {
         // The observations of this fix (they are stored fix by fix).
-        let (mut en, mut up_gps, mut up_baro) = ([0.0; 2], None, None);
+        let (mut en, mut white, mut up_gps, mut up_baro) = ([0.0; 2], [0.0; 2], None, None);
         while k < obs.len() && obs[k].row == fix.row {
             let o = &obs[k];
+            let m = misfit[k];
             match (o.axis, o.baro) {
-                (2, true) => up_baro = Some(-misfit[k]),
-                (2, false) => up_gps = Some(-misfit[k]),
-                (a, _) => en[a] = -misfit[k],
+                (2, true) => up_baro = Some(-m.metres),
+                (2, false) => up_gps = Some(-m.metres),
+                (a, _) => {
+                    en[a] = -m.metres;
+                    white[a] = -m.white;
+                }
             }
             k += 1;
         }
@@ -87,9 +98,44 @@ pub fn fix_residuals(model: &Model, theta: &[f64], traj: &impl PathAt) -> Vec<Fi
             cross: -e * h.y + n * h.x,
             up: up_baro.or(up_gps),
             speed,
+            normalised: [
+                white[0] * h.x + white[1] * h.y,
+                -white[0] * h.y + white[1] * h.x,
+            ],
         });
     }
     out
+}
+
+/// How the normalised residuals compare with what the noise model expects
+/// (independent, unit variance): their RMS (1 expected) and the share of
+/// components beyond 2 (4.6 % expected). Much more says the noise is set too
+/// tight or an effect is missing; much less, too loose.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct NormalisedSpread {
+    pub rms: f64,
+    pub beyond_2: f64,
+}
+
+impl NormalisedSpread {
+    /// Share of N(0, 1) draws beyond +-2.
+    pub const EXPECTED_BEYOND_2: f64 = 0.0455;
+
+    pub fn of(res: &[FixResidual]) -> Self {
+        let v: Vec<f64> = res
+            .iter()
+            .flat_map(|r| r.normalised)
+            .filter(|x| x.is_finite())
+            .collect();
+        if v.is_empty() {
+            return Self::default();
+        }
+        let n = v.len() as f64;
+        Self {
+            rms: (v.iter().map(|x| x * x).sum::<f64>() / n).sqrt(),
+            beyond_2: v.iter().filter(|x| x.abs() > 2.0).count() as f64 / n,
+        }
+    }
 }
 
 /// RMS of along-track, cross-track and vertical residuals.
@@ -180,6 +226,44 @@ mod tests {
         assert!(rows.len() < model.signals.len() / 20, "{} rows", rows.len());
         let sparse = fix_residuals(&model, &theta, &model.sparse_path(&theta, rows));
         assert_eq!(full, sparse);
+    }
+
+    /// With independent fixes a normalised residual is the residual over the
+    /// fix's sigma; under the noise the fit estimates from the ride the
+    /// normalised residuals spread as N(0, 1) does, and under a GPS sigma
+    /// set four times too tight they spread about four times wider.
+    #[test]
+    fn normalised_residuals_are_residuals_in_sigmas_of_the_noise_model() {
+        let sig = Arc::new(crate::testing::simulated_signals(3, 600.0, &[]));
+        let model = Model::new(sig.clone(), ModelSpec::default()).expect("model");
+        let theta = model.initial_params();
+        let res = fix_residuals(&model, &theta, &model.trajectory(&theta));
+        let sigma = model.spec.sigma_horizontal_m;
+        assert!(sig.fixes.iter().all(|f| f.hacc.is_none()));
+        assert_eq!(model.spec.gps_tau_s, None);
+        for r in &res {
+            assert!((r.normalised[0] - r.along / sigma).abs() < 1e-9 * (1.0 + r.along.abs()));
+            assert!((r.normalised[1] - r.cross / sigma).abs() < 1e-9 * (1.0 + r.cross.abs()));
+        }
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+        fit.finish();
+        let spread =
+            NormalisedSpread::of(&fix_residuals(fit.model(), fit.params(), &fit.trajectory()));
+        eprintln!("estimated noise: {spread:?}");
+        assert!((0.85..1.15).contains(&spread.rms), "{spread:?}");
+        assert!((0.02..0.08).contains(&spread.beyond_2), "{spread:?}");
+        let mut tight = FitSettings {
+            auto_noise: crate::optimisation::AutoNoise::OFF,
+            ..FitSettings::default()
+        };
+        tight.model.sigma_horizontal_m = 0.25 * fit.model().spec.sigma_horizontal_m;
+        tight.model.gps_tau_s = fit.model().spec.gps_tau_s;
+        let mut fit = Reconstruction::new(sig, tight).expect("fit");
+        fit.finish();
+        let spread =
+            NormalisedSpread::of(&fix_residuals(fit.model(), fit.params(), &fit.trajectory()));
+        eprintln!("sigma 4x too tight: {spread:?}");
+        assert!(spread.rms > 2.5 && spread.beyond_2 > 0.3, "{spread:?}");
     }
 
     #[test]

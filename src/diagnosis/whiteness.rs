@@ -226,6 +226,7 @@ mod tests {
                 cross: v,
                 up: None,
                 speed: 5.0,
+                normalised: [v, v],
             })
             .collect()
     }

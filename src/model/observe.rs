@@ -49,6 +49,15 @@ pub(crate) struct ObsPlan {
     pub links: Vec<Link>,
 }
 
+/// One observation's misfit, in metres and normalised by the noise model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct Misfit {
+    /// `x_k - y_k` (m).
+    pub metres: f64,
+    /// `e'_k`, the whitened weighted misfit (unit variance under the noise model).
+    pub white: f64,
+}
+
 /// One observation's residual and slope.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ObsValue {
@@ -163,19 +172,27 @@ impl ObsPlan {
 }
 
 impl Model {
-    /// `x_k - y_k` (m, model minus measurement) of every observation for a computed path.
-    pub(crate) fn misfits(&self, theta: &[f64], path: &impl super::PathAt) -> Vec<f64> {
+    /// Of every observation for a computed path: `x_k - y_k` (m, model minus
+    /// measurement) and its normalised innovation `e'_k = c_k (e_k - a_k e_{k-1})`
+    /// (see [`super::noise`]), before the robust loss: what the fit's noise
+    /// model says is independent with unit variance.
+    pub(crate) fn misfits(&self, theta: &[f64], path: &impl super::PathAt) -> Vec<Misfit> {
         let plan = self.obs_plan(theta);
-        self.observations
-            .iter()
-            .enumerate()
-            .map(|(k, o)| {
-                let j = plan.row[k];
-                let p = path.p_at(j);
-                let delta = p - path.p_at(j.max(1) - 1);
-                plan.x(k, o.axis, &p, &delta) - plan.target[k]
-            })
-            .collect()
+        let mut out: Vec<Misfit> = Vec::with_capacity(self.observations.len());
+        for (k, o) in self.observations.iter().enumerate() {
+            let j = plan.row[k];
+            let p = path.p_at(j);
+            let delta = p - path.p_at(j.max(1) - 1);
+            let metres = plan.x(k, o.axis, &p, &delta) - plan.target[k];
+            let e = o.w * metres;
+            let link = plan.links[k];
+            let white = match link.prev.and_then(|i| out.get(i).map(|m| (i, m))) {
+                Some((i, m)) => link.c * (e - link.a * self.observations[i].w * m.metres),
+                None => e,
+            };
+            out.push(Misfit { metres, white });
+        }
+        out
     }
 
     /// The rows a residual evaluation reads at `theta` (each observation's
