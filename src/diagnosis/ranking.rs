@@ -22,7 +22,7 @@
 //! from a single block gives `t` close to 1 whatever its size, so
 //! `t >= 1.5` rejects it. An effect that only chases noise improves some
 //! blocks and worsens others. On twelve simulated rides without a hidden
-//! effect (GPS error correlated over a minute) nothing passed, and on 45
+//! effect (GPS error correlated over a minute) nothing passed, and on 35
 //! rides with one the rule decided as it did on the per-block squared
 //! error, the per-block median error and this score alike
 //! (`examples/significance.rs`, README).
