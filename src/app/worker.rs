@@ -194,6 +194,7 @@ impl WorkerHandle {
                     running: false,
                     tx: worker_tx,
                     wake: Arc::new(wake),
+                    sigma: None,
                 }
                 .run(worker_rx)
             });
@@ -232,6 +233,16 @@ struct Worker {
     running: bool,
     tx: Sender<Update>,
     wake: Arc<dyn Fn() + Send + Sync>,
+    /// The finished fit's uncertainty and the model and parameters it is of:
+    /// 40 posterior sweeps are computed once per finished fit, not again for
+    /// every snapshot sent while it stays finished (Step, an export, a diagnosis).
+    sigma: Option<SigmaCache>,
+}
+
+struct SigmaCache {
+    spec: crate::model::ModelSpec,
+    theta: Vec<f64>,
+    u: Option<crate::model::Uncertainty>,
 }
 
 impl Worker {
@@ -457,10 +468,28 @@ impl Worker {
         self.wake.clone()
     }
 
-    fn send_snapshot(&self) {
-        if let Some(fit) = self.fit() {
-            self.send(Update::Snapshot(Box::new(snapshot(fit))));
+    fn send_snapshot(&mut self) {
+        let Some(fit) = self.ride.as_ref().and_then(|r| r.fit.as_ref()) else {
+            return;
+        };
+        let done = fit.phase() == Phase::Done;
+        let cached = self
+            .sigma
+            .as_ref()
+            .is_some_and(|c| c.theta == fit.params() && c.spec == fit.model().spec);
+        if done && !cached {
+            self.sigma = Some(SigmaCache {
+                spec: fit.model().spec.clone(),
+                theta: fit.params().to_vec(),
+                u: finished_uncertainty(fit),
+            });
         }
+        let u = self
+            .sigma
+            .as_ref()
+            .filter(|_| done)
+            .and_then(|c| c.u.as_ref());
+        self.send(Update::Snapshot(Box::new(snapshot(fit, u))));
     }
 
     fn export(&self, kind: ExportKind, path: &std::path::Path) {
@@ -536,8 +565,16 @@ fn decimated_rows(n: usize) -> Vec<usize> {
     rows
 }
 
-/// Everything the UI draws about the current state of `fit`.
-pub fn snapshot(fit: &Reconstruction) -> Snapshot {
+/// The uncertainty of a finished fit at the rows a snapshot draws.
+pub fn finished_uncertainty(fit: &Reconstruction) -> Option<crate::model::Uncertainty> {
+    let rows = decimated_rows(fit.model().signals.t.len());
+    fit.model()
+        .uncertainty_at(fit.params(), crate::model::UNCERTAINTY_SEED, Some(&rows))
+}
+
+/// Everything the UI draws about the current state of `fit`, with the
+/// finished fit's uncertainty `u` (from [`finished_uncertainty`]) if there is one.
+pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> Snapshot {
     let model = fit.model();
     let theta = fit.params();
     // One sweep, keeping only the rows drawn and the rows the residuals read:
@@ -559,10 +596,6 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
             [t[j], p.x, p.y]
         })
         .collect();
-    let done = fit.phase() == Phase::Done;
-    let u = done
-        .then(|| model.uncertainty_at(theta, crate::model::UNCERTAINTY_SEED, Some(&path_rows)))
-        .flatten();
     let mut param_sigmas = Vec::new();
     let mut params = Vec::new();
     for (e, effect) in model.effects().iter().enumerate() {
@@ -605,7 +638,7 @@ pub fn snapshot(fit: &Reconstruction) -> Snapshot {
         noise: fit.noise().cloned(),
         sigma: u.map(|u| SigmaView {
             path: u.path.iter().map(|v| [v[0], v[1], v[3]]).collect(),
-            segments: segment_sigmas(model, &u, segments_len),
+            segments: segment_sigmas(model, u, segments_len),
             params: param_sigmas,
         }),
     }
