@@ -470,7 +470,7 @@ impl super::GyropathApp {
                 ui.label("Gyro bias per segment");
                 hover = hover.or(bias_ui(ui, ride, snap, h).0);
                 if self.settings.normalised_residuals {
-                    let spread = crate::diagnosis::NormalisedSpread::of(&snap.residuals);
+                    let spread = snap.normalised_spread;
                     ui.label(format!(
                         "Residuals in sigmas: RMS {:.2} (1 expected), {:.1} % beyond ±2 ({:.1} % expected)",
                         spread.rms,

@@ -126,6 +126,8 @@ pub struct Snapshot {
     pub path: Vec<[f64; 3]>,
     pub residuals: Vec<FixResidual>,
     pub residual_rms: ResidualRms,
+    /// How the normalised residuals spread against N(0, 1).
+    pub normalised_spread: crate::diagnosis::NormalisedSpread,
     pub segments: Vec<SegmentBias>,
     /// Global parameters: effect id, name, value, unit (segment biases are in `segments`).
     pub params: Vec<(String, String, f64, String)>,
@@ -626,6 +628,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
         stats: fit.stats(),
         path,
         residual_rms: ResidualRms::of(&residuals),
+        normalised_spread: crate::diagnosis::NormalisedSpread::of(&residuals),
         residuals,
         segments,
         params,

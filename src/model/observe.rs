@@ -104,19 +104,29 @@ impl<'a> Whitener<'a> {
         }
     }
 
-    /// Residual of observation `k` whose path value is `x`; every
-    /// observation before `k` that `k` is linked to must have been seen.
+    /// Misfit of observation `k` whose path value is `x`, in metres and
+    /// whitened (`e'_k`, before the robust loss); every observation before
+    /// `k` that `k` is linked to must have been seen.
     #[inline]
-    pub fn value(&mut self, k: usize, x: f64) -> ObsValue {
-        let o = &self.obs[k];
+    pub fn misfit(&mut self, k: usize, x: f64) -> Misfit {
         let metres = x - self.plan.target[k];
-        let e = o.w * metres;
+        let e = self.obs[k].w * metres;
         self.e[k] = e;
         let link = self.plan.links[k];
-        let (white, w_prev) = match link.prev {
-            Some(j) => (link.c * (e - link.a * self.e[j]), self.obs[j].w),
-            None => (e, 0.0),
+        let white = match link.prev {
+            Some(j) => link.c * (e - link.a * self.e[j]),
+            None => e,
         };
+        Misfit { metres, white }
+    }
+
+    /// Residual of observation `k` whose path value is `x` (see [`Self::misfit`]).
+    #[inline]
+    pub fn value(&mut self, k: usize, x: f64) -> ObsValue {
+        let Misfit { metres, white } = self.misfit(k, x);
+        let o = &self.obs[k];
+        let link = self.plan.links[k];
+        let w_prev = link.prev.map_or(0.0, |j| self.obs[j].w);
         let (r, d) = match self.plan.robust {
             Some(s) if !o.baro => cauchy(white, s),
             _ => (white, 1.0),
@@ -178,21 +188,17 @@ impl Model {
     /// model says is independent with unit variance.
     pub(crate) fn misfits(&self, theta: &[f64], path: &impl super::PathAt) -> Vec<Misfit> {
         let plan = self.obs_plan(theta);
-        let mut out: Vec<Misfit> = Vec::with_capacity(self.observations.len());
-        for (k, o) in self.observations.iter().enumerate() {
-            let j = plan.row[k];
-            let p = path.p_at(j);
-            let delta = p - path.p_at(j.max(1) - 1);
-            let metres = plan.x(k, o.axis, &p, &delta) - plan.target[k];
-            let e = o.w * metres;
-            let link = plan.links[k];
-            let white = match link.prev.and_then(|i| out.get(i).map(|m| (i, m))) {
-                Some((i, m)) => link.c * (e - link.a * self.observations[i].w * m.metres),
-                None => e,
-            };
-            out.push(Misfit { metres, white });
-        }
-        out
+        let mut whitener = Whitener::new(&plan, &self.observations);
+        self.observations
+            .iter()
+            .enumerate()
+            .map(|(k, o)| {
+                let j = plan.row[k];
+                let p = path.p_at(j);
+                let delta = p - path.p_at(j.max(1) - 1);
+                whitener.misfit(k, plan.x(k, o.axis, &p, &delta))
+            })
+            .collect()
     }
 
     /// The rows a residual evaluation reads at `theta` (each observation's
