@@ -685,6 +685,12 @@ fn fix_series_ui(
 /// line still runs off the plot. A 6-hour ride's 19,000 residuals per
 /// series become about 1,000 points, and a frame stays within its budget.
 pub fn decimate(points: &[[f64; 2]], lo: f64, hi: f64, pixels: usize) -> Vec<[f64; 2]> {
+    let (Some(a), Some(b)) = (points.first(), points.last()) else {
+        return Vec::new();
+    };
+    // Columns over the points' own span at most: an auto-bounded view
+    // passes an unbounded range (see `view`) and gets the whole line thinned.
+    let (lo, hi) = (lo.max(a[0]), hi.min(b[0]));
     let first = points.partition_point(|p| p[0] < lo).saturating_sub(1);
     let last = (points.partition_point(|p| p[0] <= hi) + 1).min(points.len());
     let visible = &points[first.min(last)..last];
@@ -742,9 +748,17 @@ fn thin_to_pixels(
 }
 
 /// The visible x range of a plot and its width in points.
+/// The x range a time plot shows and its width in pixels. While the plot
+/// bounds itself to its data (a plot just shown, or never zoomed), the whole
+/// range: its last bounds are those of the last frame's points (or, on its
+/// first frame, a unit box at the origin), and lines decimated to them would
+/// keep it zoomed in on the start of the ride.
 fn view(plot: &egui_plot::PlotUi<'_>) -> (f64, f64, usize) {
-    let b = plot.plot_bounds();
     let px = plot.response().rect.width().max(1.0) as usize;
+    if plot.auto_bounds().x {
+        return (f64::NEG_INFINITY, f64::INFINITY, px);
+    }
+    let b = plot.plot_bounds();
     (b.min()[0], b.max()[0], px)
 }
 
@@ -793,6 +807,12 @@ mod tests {
         assert!(d.windows(2).all(|w| w[0][0] <= w[1][0]), "in order");
         let few = decimate(&pts[..50], 0.0, 49.0, 100);
         assert_eq!(few.len(), 50, "nothing to thin");
+        // An auto-bounded plot's unbounded range: the whole line, thinned.
+        let all = decimate(&pts, f64::NEG_INFINITY, f64::INFINITY, 100);
+        assert!(all.len() <= 2 * (100 + 1), "{}", all.len());
+        assert_eq!((all[0], all[all.len() - 1]), (pts[0], pts[9999]));
+        assert!(all.iter().any(|p| p[1] == 50.0), "the spike survives");
+        assert!(decimate(&[], 0.0, 1.0, 100).is_empty());
     }
 
     #[test]
