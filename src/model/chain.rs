@@ -165,7 +165,7 @@ impl Work {
                 stack[(self.rows.nrows() + i, k)] = v;
             }
         }
-        triangularise(&mut stack, n);
+        triangularise(&mut stack, n, self.rows.nrows());
         self.rows = stack.rows(0, n).into_owned();
     }
 
@@ -231,41 +231,68 @@ impl Work {
     }
 }
 
-/// Householder QR of the first `n` columns of `a` in place (rows below `n` end up zero).
-fn triangularise(a: &mut DMatrix<f64>, n: usize) {
+/// Householder QR of the first `n` columns of `a` in place (rows below `n`
+/// end up zero). The first `tri` rows are the triangle of an earlier
+/// compression: where a column is zero below the diagonal inside them (always,
+/// unless blocks were opened in between), its reflection only touches the
+/// diagonal row and the rows after `tri`, and skips the others. Columns are
+/// contiguous slices, so the inner loops vectorise.
+fn triangularise(a: &mut DMatrix<f64>, n: usize, tri: usize) {
     let nr = a.nrows();
     let nc = a.ncols();
+    let data = a.as_mut_slice();
     let mut v = vec![0.0; nr];
     for j in 0..n.min(nr) {
-        let norm = (j..nr).map(|i| a[(i, j)] * a[(i, j)]).sum::<f64>().sqrt();
+        let (head, tail) = data.split_at_mut((j + 1) * nr);
+        let col = &head[j * nr..];
+        // Rows the reflection touches: j and `from..nr`.
+        let from = if j + 1 < tri && col[j + 1..tri].iter().all(|&x| x == 0.0) {
+            tri
+        } else {
+            j + 1
+        };
+        let norm = (col[j] * col[j] + dot(&col[from..], &col[from..])).sqrt();
         if norm == 0.0 {
             continue;
         }
-        let x0 = a[(j, j)];
-        let alpha = if x0 > 0.0 { -norm } else { norm };
-        for i in j..nr {
-            v[i] = a[(i, j)];
-        }
-        v[j] -= alpha;
-        let vv = (j..nr).map(|i| v[i] * v[i]).sum::<f64>();
+        let alpha = if col[j] > 0.0 { -norm } else { norm };
+        let vj = col[j] - alpha;
+        v[from..].copy_from_slice(&col[from..]);
+        let vv = vj * vj + dot(&v[from..], &v[from..]);
         if vv == 0.0 {
             continue;
         }
-        a[(j, j)] = alpha;
-        for i in j + 1..nr {
-            a[(i, j)] = 0.0;
-        }
+        let two_over_vv = 2.0 / vv;
+        let col = &mut head[j * nr..];
+        col[j] = alpha;
+        col[j + 1..].fill(0.0);
         for k in j + 1..nc {
-            let dot = (j..nr).map(|i| v[i] * a[(i, k)]).sum::<f64>();
-            if dot == 0.0 {
+            let c = &mut tail[(k - j - 1) * nr..(k - j) * nr];
+            let d = vj * c[j] + dot(&v[from..], &c[from..]);
+            if d == 0.0 {
                 continue;
             }
-            let f = 2.0 * dot / vv;
-            for i in j..nr {
-                a[(i, k)] -= f * v[i];
+            let f = d * two_over_vv;
+            c[j] -= f * vj;
+            for (ci, vi) in c[from..].iter_mut().zip(&v[from..]) {
+                *ci -= f * vi;
             }
         }
     }
+}
+
+/// `x . y` with four partial sums (so that it vectorises).
+fn dot(x: &[f64], y: &[f64]) -> f64 {
+    let mut acc = [0.0; 4];
+    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
+    let (xr, yr) = (xc.remainder(), yc.remainder());
+    for (a, b) in xc.zip(yc) {
+        for i in 0..4 {
+            acc[i] += a[i] * b[i];
+        }
+    }
+    let tail: f64 = xr.iter().zip(yr).map(|(a, b)| a * b).sum();
+    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 /// Solve the upper-triangular `r x = z`; `None` if singular or not finite.

@@ -85,7 +85,61 @@ pub(crate) fn links(obs: &[Observation], tau: Option<f64>) -> Vec<Link> {
     out
 }
 
+/// A first guess of the GPS sigma per axis and the correlation time from
+/// horizontal misfits `(t, axis, x - y)` of a fitted path: the RMS misfit,
+/// and `tau = -dt / ln rho_1` from the lag-one correlation `rho_1` of
+/// consecutive fixes (linked as [`links`] links them, `dt` their median
+/// spacing). Biased low, both (the fitted path leans towards the fixes), but
+/// within a small factor of what the likelihood prefers, where a
+/// search started from the settings as set may begin tens of times off.
+/// `None` with fewer than ten linked pairs or no positive correlation.
+pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64)> {
+    let n = misfits.len();
+    if n == 0 {
+        return None;
+    }
+    let sigma = (misfits.iter().map(|m| m.2 * m.2).sum::<f64>() / n as f64).sqrt();
+    let mut last: [Option<(f64, f64)>; 2] = [None; 2];
+    let (mut cross, mut sq_prev, mut sq_here) = (0.0, 0.0, 0.0);
+    let mut spacing = Vec::new();
+    for &(t, axis, e) in misfits {
+        let axis = axis.min(1);
+        if let Some((tp, ep)) = last[axis]
+            && t > tp
+            && t - tp <= OUTAGE_S
+        {
+            cross += e * ep;
+            sq_prev += ep * ep;
+            sq_here += e * e;
+            spacing.push(t - tp);
+        }
+        last[axis] = Some((t, e));
+    }
+    if spacing.len() < 10 || sigma.is_nan() || sigma <= 0.0 {
+        return None;
+    }
+    let rho = cross / (sq_prev * sq_here).sqrt();
+    spacing.sort_by(f64::total_cmp);
+    let dt = spacing[spacing.len() / 2];
+    (rho > 0.0 && rho < 1.0).then(|| (sigma, -dt / rho.ln()))
+}
+
 impl Model {
+    /// [`gps_noise_guess`] from the horizontal misfits of the path values `x`
+    /// (one per observation, as a linearisation holds them) at `theta`.
+    pub(crate) fn gps_noise_guess(&self, theta: &[f64], x: &[f64]) -> Option<(f64, f64)> {
+        let plan = self.obs_plan(theta);
+        let misfits: Vec<(f64, usize, f64)> = self
+            .observations
+            .iter()
+            .zip(x)
+            .zip(&plan.target)
+            .filter(|((o, _), _)| !o.baro && o.axis < 2)
+            .map(|((o, x), y)| (o.t, o.axis, x - y))
+            .collect();
+        gps_noise_guess(&misfits)
+    }
+
     /// `ln det` of the covariance of everything the cost weighs: the
     /// observations' (`prod sigma_k^2 (1 - a_k^2)`: a chain's covariance
     /// determinant is its innovations') and the prior rows' with a free
@@ -126,6 +180,31 @@ mod tests {
             baro,
             t,
         }
+    }
+
+    #[test]
+    fn the_guess_recovers_a_gauss_markov_error() {
+        // Two axes of 1 Hz fixes, sigma 2 m, tau 15 s, an outage in the middle.
+        let mut rng = crate::simulation::rng::Rng::new(5);
+        let (sigma, tau) = (2.0, 15.0);
+        let a = (-1.0f64 / tau).exp();
+        let mut misfits = Vec::new();
+        let mut n = [sigma * rng.normal(), sigma * rng.normal()];
+        for k in 0..4000 {
+            let t = k as f64 + if k >= 2000 { 60.0 } else { 0.0 };
+            for (axis, e) in n.iter_mut().enumerate() {
+                *e = a * *e + (1.0 - a * a).sqrt() * sigma * rng.normal();
+                misfits.push((t, axis, *e));
+            }
+        }
+        let (s, t) = gps_noise_guess(&misfits).unwrap();
+        assert!((s / sigma - 1.0).abs() < 0.1, "sigma {s}");
+        assert!((t / tau - 1.0).abs() < 0.25, "tau {t}");
+        // White errors: no positive correlation, no guess of tau.
+        let white: Vec<_> = (0..400).map(|k| (k as f64, 0, rng.normal())).collect();
+        let guess = gps_noise_guess(&white);
+        assert!(guess.is_none_or(|(_, t)| t < 1.0), "{guess:?}");
+        assert_eq!(gps_noise_guess(&white[..5]), None, "too few pairs");
     }
 
     #[test]

@@ -1,0 +1,53 @@
+//! Where a fit's time goes: wall time per phase (step 1, step 2, noise
+//! search) of a simulated ride. `cargo run --release --example phase_times -- [minutes] [seed]`.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use gyropath::import::parse;
+use gyropath::optimisation::{FitSettings, Phase, Reconstruction};
+use gyropath::signals::Signals;
+use gyropath::simulation::{SimConfig, simulate};
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().collect();
+    let minutes: f64 = args.get(1).map_or(Ok(30.0), |s| s.parse())?;
+    let seed: u64 = args.get(2).map_or(Ok(3), |s| s.parse())?;
+    let sim = simulate(&SimConfig {
+        seed,
+        duration_s: minutes * 60.0,
+        ..SimConfig::default()
+    })?;
+    let started = Instant::now();
+    let sig = Arc::new(Signals::from_log(&parse(sim.log_csv.as_bytes(), "sim")?)?);
+    let load = started.elapsed().as_secs_f64();
+    let mut rec = Reconstruction::new(sig, FitSettings::default())?;
+    let mut times = [0.0f64; 3];
+    let mut counts = [0usize; 3];
+    loop {
+        let t = Instant::now();
+        let Some(report) = rec.iterate() else { break };
+        let slot = match report.phase {
+            Phase::Step1 => 0,
+            Phase::Step2 => 1,
+            _ => 2,
+        };
+        times[slot] += t.elapsed().as_secs_f64();
+        counts[slot] += 1;
+    }
+    let evals = rec.noise().map_or(0, |n| n.evaluations);
+    println!(
+        "{minutes} min seed {seed}: load {load:.3} s, step 1 {:.3} s ({} it), step 2 {:.3} s ({} it), noise {:.3} s ({evals} evals), total {:.3} s, rms {:.3} m",
+        times[0],
+        counts[0],
+        times[1],
+        counts[1],
+        times[2],
+        started.elapsed().as_secs_f64(),
+        rec.stats().rms_horizontal_m
+    );
+    if let Some(n) = rec.noise() {
+        println!("{}", n.describe());
+    }
+    Ok(())
+}
