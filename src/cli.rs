@@ -678,15 +678,7 @@ fn print_summary(r: &FitReport) {
         }
         let list: Vec<String> = values
             .iter()
-            .map(|p| {
-                if p.fixed {
-                    format!("{} not fitted", p.name)
-                } else if let Some(sigma) = p.sigma {
-                    format!("{} {:.5} ± {:.5} {}", p.name, p.value, sigma, p.unit)
-                } else {
-                    format!("{} {:.5} {}", p.name, p.value, p.unit)
-                }
-            })
+            .map(|p| format!("{} {}", p.name, p.describe()))
             .collect();
         println!("{effect}: {}", list.join(", "));
     }
@@ -854,7 +846,7 @@ fn print_diagnosis(d: &Diagnosis) {
         let est: Vec<String> = c
             .estimate
             .iter()
-            .map(|(k, e)| format!("{k} {:.3} ± {:.3} {}", e.value, e.sigma, e.unit))
+            .map(|(k, e)| format!("{k} {}", e.describe()))
             .collect();
         println!(
             "{:<5}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}  {}",

@@ -168,6 +168,19 @@ pub struct ParamValue {
     /// `model::uncertainty`); `None` where not computed (segment biases, the
     /// constant bias, fixed parameters).
     pub sigma: Option<f64>,
+    /// `false` when the sigma spans what the parameter can physically be:
+    /// the ride does not determine it (see `ParamInfo::within`).
+    pub determined: bool,
+}
+
+impl ParamValue {
+    /// "value ± sigma unit", or why there is no sigma.
+    pub fn describe(&self) -> String {
+        if self.fixed {
+            return "not fitted".to_string();
+        }
+        crate::effects::plus_minus(self.value, self.sigma, self.determined, &self.unit, 5)
+    }
 }
 
 /// The fit report written by `gyropath fit --report`.
@@ -225,12 +238,14 @@ impl FitReport {
             .zip(fixed)
             .zip(sigmas)
         {
+            let determined = sigma.is_none_or(|s| info.determined(s));
             parameters.entry(effect).or_default().push(ParamValue {
                 name: info.name,
                 value: value * info.scale,
                 unit: info.unit.to_string(),
                 fixed,
                 sigma: sigma.map(|s| s * info.scale.abs()),
+                determined,
             });
         }
         let [s1, s2] = fit.phase_iterations();

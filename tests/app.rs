@@ -83,8 +83,9 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .iter()
         .position(|p| p.1 == "gain")
         .expect("gain");
-    let sd = sigma.params[gain].expect("the gain has a sigma");
-    h.get_by_label(&format!("{:.5} ± {sd:.5} ", snap.params[gain].2));
+    let (sd, determined) = sigma.params[gain].expect("the gain has a sigma");
+    assert!(determined, "a bicycle's odometer gain is measured, sd {sd}");
+    h.get_by_label(&format!("{:.5} ± {sd:.5}", snap.params[gain].2));
     // Residuals in sigmas of the noise model, with how they spread against N(0, 1).
     let spread = gyropath::diagnosis::NormalisedSpread::of(&snap.residuals);
     assert!((0.7..1.4).contains(&spread.rms), "{spread:?}");

@@ -102,7 +102,7 @@ impl GyropathApp {
                                 let est: Vec<String> = c
                                     .estimate
                                     .iter()
-                                    .map(|(k, e)| format!("{k} {:.3}±{:.3}", e.value, e.sigma))
+                                    .map(|(k, e)| format!("{k} {}", e.describe()))
                                     .collect();
                                 ui.label(est.join(", ")).on_hover_text(&c.explanation);
                             }

@@ -94,10 +94,13 @@ impl GyropathApp {
                             .sigma
                             .as_ref()
                             .and_then(|u| u.params.get(k).copied().flatten());
-                        ui.label(match sigma {
-                            Some(sd) => format!("{value:.5} ± {sd:.5} {unit}"),
-                            None => format!("{value:.5} {unit}"),
-                        });
+                        ui.label(crate::effects::plus_minus(
+                            *value,
+                            sigma.map(|(sd, _)| sd),
+                            sigma.is_none_or(|(_, determined)| determined),
+                            unit,
+                            5,
+                        ));
                         ui.end_row();
                     }
                 });

@@ -7,8 +7,8 @@
 
 use egui::{Color32, Id};
 use egui_plot::{
-    GridInput, GridMark, HLine, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points,
-    VLine,
+    GridInput, GridMark, HLine, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints,
+    Points, Text, VLine,
 };
 
 use super::worker::{RideView, SigmaView, Snapshot};
@@ -18,6 +18,7 @@ use crate::optimisation::IterationReport;
 const GPS: Color32 = Color32::from_rgb(120, 160, 255);
 const PATH: Color32 = Color32::from_rgb(255, 200, 60);
 const OUTAGE: Color32 = Color32::from_rgb(255, 110, 200);
+const SCALE: Color32 = Color32::from_gray(210);
 const SIGMA: Color32 = Color32::from_rgba_premultiplied(150, 150, 150, 140);
 const AXES: [Color32; 3] = [
     Color32::from_rgb(240, 90, 90),
@@ -215,6 +216,7 @@ pub fn map_ui(
             if let Some(sigma) = &snap.sigma {
                 sigma_ellipses_ui(plot, snap, sigma);
             }
+            scale_bar_ui(plot);
             if let Some(t) = hover_t
                 && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
             {
@@ -237,6 +239,46 @@ pub fn map_ui(
                 }
             }
         });
+}
+
+/// A scale bar's length for a map `width` metres wide (a 1-2-5 step of a
+/// fifth to a half of it) and its label; `None` for no width.
+pub fn scale_bar(width: f64) -> Option<(f64, String)> {
+    if !(width.is_finite() && width > 0.0) {
+        return None;
+    }
+    let length = nice_step(width / 5.0);
+    let label = if length >= 1000.0 {
+        format!("{} km", length / 1000.0)
+    } else {
+        format!("{length} m")
+    };
+    Some((length, label))
+}
+
+/// The scale bar in the map's lower left corner: the axes give the
+/// coordinates, the bar how far a distance on screen is at a glance.
+fn scale_bar_ui(plot: &mut egui_plot::PlotUi<'_>) {
+    let b = plot.plot_bounds();
+    let (w, h) = (b.width(), b.height());
+    let Some((length, label)) = scale_bar(w) else {
+        return;
+    };
+    let (x, y) = (b.min()[0] + 0.04 * w, b.min()[1] + 0.05 * h);
+    let tick = 0.012 * h;
+    let bar = vec![
+        [x, y + tick],
+        [x, y],
+        [x + length, y],
+        [x + length, y + tick],
+    ];
+    // No name: the bar is not data and stays out of the legend.
+    plot.line(Line::new("", bar).color(SCALE).width(2.0));
+    plot.text(
+        Text::new("", PlotPoint::new(x + 0.5 * length, y + 1.5 * tick), label)
+            .color(SCALE)
+            .anchor(egui::Align2::CENTER_BOTTOM),
+    );
 }
 
 /// How many 95 % ellipses the map draws along the path.
@@ -773,6 +815,20 @@ fn hovered_time(plot: &egui_plot::PlotUi<'_>, t0: f64) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_scale_bar_is_a_round_fifth_of_the_map() {
+        assert_eq!(scale_bar(1000.0), Some((200.0, "200 m".to_string())));
+        assert_eq!(scale_bar(130.0), Some((50.0, "50 m".to_string())));
+        assert_eq!(scale_bar(12_000.0), Some((5000.0, "5 km".to_string())));
+        assert_eq!(scale_bar(3.0), Some((1.0, "1 m".to_string())));
+        for w in [0.7, 13.0, 480.0, 2.5e4] {
+            let (l, _) = scale_bar(w).unwrap();
+            assert!(l >= w / 5.0 && l <= 0.5 * w + 1e-9, "{w}: {l}");
+        }
+        assert_eq!(scale_bar(0.0), None);
+        assert_eq!(scale_bar(f64::NAN), None);
+    }
 
     #[test]
     fn ellipses_have_the_covariance_axes() {

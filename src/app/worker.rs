@@ -149,8 +149,9 @@ pub struct SigmaView {
     pub path: Vec<[f64; 3]>,
     /// Per segment: 1-sigma bias x, y, z (deg/s).
     pub segments: Vec<[f64; 3]>,
-    /// Per entry of `Snapshot::params`: its 1-sigma.
-    pub params: Vec<Option<f64>>,
+    /// Per entry of `Snapshot::params`: its 1-sigma, and whether that
+    /// determines it (see `ParamInfo::within`).
+    pub params: Vec<Option<(f64, bool)>>,
 }
 
 /// Worker -> UI.
@@ -610,10 +611,10 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
             if effect.fixed(i) {
                 continue;
             }
-            param_sigmas
-                .push(u.as_ref().and_then(|u| {
-                    u.params[model.range(e).start + i].map(|s| s * info.scale.abs())
-                }));
+            param_sigmas.push(u.as_ref().and_then(|u| {
+                u.params[model.range(e).start + i]
+                    .map(|s| (s * info.scale.abs(), info.determined(s)))
+            }));
             params.push((
                 effect.id(),
                 info.name.clone(),

@@ -145,6 +145,7 @@ mod tests {
             value: v,
             sigma: 1.0,
             unit: "deg".into(),
+            determined: true,
         };
         let (pitch, yaw) = ("forward_pitch".to_string(), "forward_yaw".to_string());
         let real = [(&pitch, &e(4.0)), (&yaw, &e(-3.0))];

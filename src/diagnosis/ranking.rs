@@ -54,6 +54,16 @@ pub struct Estimate {
     pub value: f64,
     pub sigma: f64,
     pub unit: String,
+    /// `false` when the sigma spans what the parameter can physically be
+    /// (see `ParamInfo::within`): the ride does not determine it.
+    pub determined: bool,
+}
+
+impl Estimate {
+    /// "value ± sigma unit", or "not determined by this ride".
+    pub fn describe(&self) -> String {
+        crate::effects::plus_minus(self.value, Some(self.sigma), self.determined, &self.unit, 3)
+    }
 }
 
 /// One candidate effect, fitted and validated.
@@ -379,8 +389,9 @@ fn estimates(
                 key,
                 Estimate {
                     value: theta[i] * info.scale,
-                    sigma: sigma * info.scale,
+                    sigma: sigma * info.scale.abs(),
                     unit: info.unit.to_string(),
+                    determined: info.determined(sigma),
                 },
             );
         }

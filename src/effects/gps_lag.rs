@@ -20,7 +20,7 @@ impl Effect for GpsLag {
     }
 
     fn params(&self) -> Vec<ParamInfo> {
-        vec![ParamInfo::new("lag", "s", 1.0)]
+        vec![ParamInfo::new("lag", "s", 1.0).within(5.0)]
     }
 
     fn initial(&self, _guess: &StartGuess) -> Vec<f64> {

@@ -34,7 +34,7 @@ impl Effect for GyroScale {
     fn params(&self) -> Vec<ParamInfo> {
         ["x", "y", "z"]
             .iter()
-            .map(|a| ParamInfo::new(format!("scale_error_{a}"), "%", 100.0))
+            .map(|a| ParamInfo::new(format!("scale_error_{a}"), "%", 100.0).within(0.5))
             .collect()
     }
 

@@ -36,7 +36,10 @@ impl Effect for InitialOrientation {
     fn params(&self) -> Vec<ParamInfo> {
         ["east", "north", "up"]
             .iter()
-            .map(|a| ParamInfo::new(format!("rotation_{a}"), "deg", 180.0 / std::f64::consts::PI))
+            .map(|a| {
+                ParamInfo::new(format!("rotation_{a}"), "deg", 180.0 / std::f64::consts::PI)
+                    .within(std::f64::consts::FRAC_PI_2)
+            })
             .collect()
     }
 

@@ -59,6 +59,10 @@ pub struct ParamInfo {
     pub unit: &'static str,
     #[serde(skip)]
     pub scale: f64,
+    /// A 1-sigma at or above this (internal units) says the ride does not
+    /// determine the parameter (see [`Self::within`]); infinite: always shown.
+    #[serde(skip)]
+    pub range: f64,
 }
 
 impl ParamInfo {
@@ -67,8 +71,42 @@ impl ParamInfo {
             name: name.into(),
             unit,
             scale,
+            range: f64::INFINITY,
         }
     }
+
+    /// With the span of values the parameter can physically take: a sigma
+    /// as wide as that (an angle known to +-90 degrees, a gain to +-50 %) is
+    /// not a measurement but a direction the ride does not see (a planar
+    /// robot's mounting yaw, which trades exactly against its start heading),
+    /// and is shown as such instead of as a number.
+    pub fn within(mut self, range: f64) -> Self {
+        self.range = range;
+        self
+    }
+
+    /// Whether a 1-sigma of `sigma` (internal units) determines the parameter.
+    pub fn determined(&self, sigma: f64) -> bool {
+        sigma.is_finite() && sigma < self.range
+    }
+}
+
+/// A value with its 1-sigma for people: "0.97677 ± 0.00083" (then the
+/// unit), or "not determined by this ride" when the sigma says so.
+pub fn plus_minus(
+    value: f64,
+    sigma: Option<f64>,
+    determined: bool,
+    unit: &str,
+    digits: usize,
+) -> String {
+    match sigma {
+        Some(_) if !determined => format!("{value:.digits$} {unit} (not determined by this ride)"),
+        Some(s) => format!("{value:.digits$} ± {s:.digits$} {unit}"),
+        None => format!("{value:.digits$} {unit}"),
+    }
+    .trim_end()
+    .to_string()
 }
 
 /// Which optimisation step fits an effect's parameters.
@@ -552,5 +590,37 @@ pub(crate) mod testing {
             let fd = (effect.gyro(&pp, j, omega) - effect.gyro(&pm, j, omega)) / (2.0 * h);
             assert!((fd - col).norm() < 1e-7, "param {i}: fd {fd} vs {col}");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::FRAC_PI_2;
+
+    #[test]
+    fn a_sigma_as_wide_as_the_physical_range_reads_not_determined() {
+        let yaw = ParamInfo::new("forward_yaw", "deg", DEG_PER_RAD).within(FRAC_PI_2);
+        // A planar robot's mounting yaw: 84,191 deg of sigma is no measurement.
+        let sigma = 84191.0 / DEG_PER_RAD;
+        assert!(!yaw.determined(sigma));
+        assert!(!yaw.determined(f64::NAN));
+        assert!(yaw.determined(2.0 / DEG_PER_RAD));
+        assert_eq!(
+            plus_minus(0.001, Some(84191.0), yaw.determined(sigma), "deg", 3),
+            "0.001 deg (not determined by this ride)"
+        );
+        assert_eq!(
+            plus_minus(1.5, Some(0.25), true, "deg", 3),
+            "1.500 ± 0.250 deg"
+        );
+        // No unit, no trailing space; no sigma, the value alone.
+        assert_eq!(
+            plus_minus(0.97677, Some(0.00083), true, "", 5),
+            "0.97677 ± 0.00083"
+        );
+        assert_eq!(plus_minus(2.0, None, true, "m", 1), "2.0 m");
+        // Unbounded parameters are always shown with their sigma.
+        assert!(ParamInfo::new("start_east", "m", 1.0).determined(1e6));
     }
 }

@@ -15,6 +15,8 @@
 //! offset alone is nearly absorbed by the initial heading while the sensor's
 //! z axis stays vertical; leaning into turns and pitching on slopes separate them.
 
+use std::f64::consts::FRAC_PI_2;
+
 use nalgebra::Vector3;
 
 use super::gyro_bias::DEG_PER_RAD;
@@ -44,8 +46,8 @@ impl Effect for MountMisalignment {
 
     fn params(&self) -> Vec<ParamInfo> {
         vec![
-            ParamInfo::new("forward_yaw", "deg", DEG_PER_RAD),
-            ParamInfo::new("forward_pitch", "deg", DEG_PER_RAD),
+            ParamInfo::new("forward_yaw", "deg", DEG_PER_RAD).within(FRAC_PI_2),
+            ParamInfo::new("forward_pitch", "deg", DEG_PER_RAD).within(FRAC_PI_2),
         ]
     }
 

@@ -24,7 +24,7 @@ impl Effect for OdometerGain {
     }
 
     fn params(&self) -> Vec<ParamInfo> {
-        vec![ParamInfo::new("gain", "", 1.0)]
+        vec![ParamInfo::new("gain", "", 1.0).within(0.5)]
     }
 
     fn initial(&self, guess: &StartGuess) -> Vec<f64> {
