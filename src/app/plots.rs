@@ -265,17 +265,14 @@ fn scale_bar_ui(plot: &mut egui_plot::PlotUi<'_>) {
         return;
     };
     let (x, y) = (b.min()[0] + 0.04 * w, b.min()[1] + 0.05 * h);
-    let tick = 0.012 * h;
-    let bar = vec![
-        [x, y + tick],
-        [x, y],
-        [x + length, y],
-        [x + length, y + tick],
-    ];
     // No name: the bar is not data and stays out of the legend.
-    plot.line(Line::new("", bar).color(SCALE).width(2.0));
+    plot.line(
+        Line::new("", vec![[x, y], [x + length, y]])
+            .color(SCALE)
+            .width(4.0),
+    );
     plot.text(
-        Text::new("", PlotPoint::new(x + 0.5 * length, y + 1.5 * tick), label)
+        Text::new("", PlotPoint::new(x + 0.5 * length, y + 0.015 * h), label)
             .color(SCALE)
             .anchor(egui::Align2::CENTER_BOTTOM),
     );
