@@ -7,8 +7,8 @@
 
 use egui::{Color32, Id};
 use egui_plot::{
-    GridInput, GridMark, HLine, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints,
-    Points, Text, VLine,
+    GridInput, GridMark, HLine, Legend, Line, LineStyle, MarkerShape, Plot, PlotPoints, Points,
+    VLine,
 };
 
 use super::worker::{RideView, SigmaView, Snapshot};
@@ -165,7 +165,7 @@ pub fn map_ui(
     colour_by_residual: bool,
     hover_t: Option<f64>,
 ) {
-    Plot::new("map")
+    let shown = Plot::new("map")
         .data_aspect(1.0)
         .x_grid_spacer(nice_grid)
         .y_grid_spacer(nice_grid_y)
@@ -216,7 +216,6 @@ pub fn map_ui(
             if let Some(sigma) = &snap.sigma {
                 sigma_ellipses_ui(plot, snap, sigma);
             }
-            scale_bar_ui(plot);
             if let Some(t) = hover_t
                 && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
             {
@@ -239,6 +238,7 @@ pub fn map_ui(
                 }
             }
         });
+    scale_bar_ui(ui, &shown.transform);
 }
 
 /// A scale bar's length for a map `width` metres wide (a 1-2-5 step of a
@@ -257,24 +257,32 @@ pub fn scale_bar(width: f64) -> Option<(f64, String)> {
 }
 
 /// The scale bar in the map's lower left corner: the axes give the
-/// coordinates, the bar how far a distance on screen is at a glance.
-fn scale_bar_ui(plot: &mut egui_plot::PlotUi<'_>) {
-    let b = plot.plot_bounds();
-    let (w, h) = (b.width(), b.height());
-    let Some((length, label)) = scale_bar(w) else {
+/// coordinates, the bar how far a distance on screen is at a glance. Painted
+/// on the screen over the plot, not as a plot item: an item would count in
+/// the plot's automatic bounds, and a bar placed by the last frame's bounds
+/// then pushes the next frame's out by a little every frame (on a 6-hour
+/// ride the map had crept out to 18,000 km).
+fn scale_bar_ui(ui: &egui::Ui, transform: &egui_plot::PlotTransform) {
+    let Some((length, label)) = scale_bar(transform.bounds().width()) else {
         return;
     };
-    let (x, y) = (b.min()[0] + 0.04 * w, b.min()[1] + 0.05 * h);
-    // No name: the bar is not data and stays out of the legend.
-    plot.line(
-        Line::new("", vec![[x, y], [x + length, y]])
-            .color(SCALE)
-            .width(4.0),
+    let frame = *transform.frame();
+    let px = (length * transform.dpos_dvalue_x()).abs() as f32;
+    let start = egui::pos2(
+        frame.left() + 0.04 * frame.width(),
+        frame.bottom() - 0.05 * frame.height(),
     );
-    plot.text(
-        Text::new("", PlotPoint::new(x + 0.5 * length, y + 0.015 * h), label)
-            .color(SCALE)
-            .anchor(egui::Align2::CENTER_BOTTOM),
+    let painter = ui.painter_at(frame);
+    painter.line_segment(
+        [start, start + egui::vec2(px, 0.0)],
+        egui::Stroke::new(4.0, SCALE),
+    );
+    painter.text(
+        start + egui::vec2(0.5 * px, -5.0),
+        egui::Align2::CENTER_BOTTOM,
+        label,
+        egui::FontId::proportional(11.0),
+        SCALE,
     );
 }
 
