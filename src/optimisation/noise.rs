@@ -283,8 +283,12 @@ pub fn estimate(
     let (best, value, sd) = if dims.is_empty() {
         (y0, f0, Vec::new())
     } else {
-        let (best, value) = nelder_mead(&f, &y0, f0, 0.7, NM_TOLERANCE, 120);
-        let sd = log_sd(&f, &best, value);
+        let objective = Objective {
+            f: &f,
+            side_by_side: model.signals.fixes.len() <= SIDE_BY_SIDE_FIXES,
+        };
+        let (best, value) = nelder_mead(objective, &y0, f0, 0.7, NM_TOLERANCE, 120);
+        let sd = log_sd(objective, &best, value);
         (best, value, sd)
     };
     let evaluations = evaluations.into_inner();
@@ -358,11 +362,31 @@ pub fn segment_preference(model: &Model, theta: &[f64]) -> Vec<(f64, f64)> {
 }
 
 /// A function of the log-settings, evaluated side by side where it can be.
-type Objective<'a> = &'a (dyn Fn(&[f64]) -> f64 + Sync);
+#[derive(Clone, Copy)]
+struct Objective<'a> {
+    f: &'a (dyn Fn(&[f64]) -> f64 + Sync),
+    /// Evaluate independent points in parallel. Each evaluation holds a
+    /// model and a chain system of its own, about 3 kB per fix (60 MB on a
+    /// 6-hour ride): past [`SIDE_BY_SIDE_FIXES`] one at a time.
+    side_by_side: bool,
+}
 
-/// `f` at each of `points`, in parallel.
-fn values_at(f: Objective, points: &[Vec<f64>]) -> Vec<f64> {
-    points.par_iter().map(|p| f(p)).collect()
+/// Rides with more fixes than this search their noise one evaluation at a time.
+const SIDE_BY_SIDE_FIXES: usize = 10_000;
+
+impl Objective<'_> {
+    fn at(&self, x: &[f64]) -> f64 {
+        (self.f)(x)
+    }
+
+    /// The function at each of `points`.
+    fn values(&self, points: &[Vec<f64>]) -> Vec<f64> {
+        if self.side_by_side {
+            points.par_iter().map(|p| self.at(p)).collect()
+        } else {
+            points.iter().map(|p| self.at(p)).collect()
+        }
+    }
 }
 
 /// Nelder-Mead minimisation from `x0` (where `f` is `f0`) with initial step
@@ -388,7 +412,7 @@ fn nelder_mead(
         })
         .collect();
     let mut simplex: Vec<(Vec<f64>, f64)> = std::iter::once((x0.to_vec(), f0))
-        .chain(moved.iter().cloned().zip(values_at(f, &moved)))
+        .chain(moved.iter().cloned().zip(f.values(&moved)))
         .collect();
     let mut evals = n + 1;
     let point = |c: &[f64], d: &[f64], t: f64| -> Vec<f64> {
@@ -416,7 +440,7 @@ fn nelder_mead(
         let reflected = point(&centroid, &worst.0, -1.0);
         let expanded = point(&centroid, &worst.0, -2.0);
         // The expansion is only used when the reflection is the best point yet.
-        let both = values_at(f, &[reflected.clone(), expanded.clone()]);
+        let both = f.values(&[reflected.clone(), expanded.clone()]);
         let (fr, fe) = (both[0], both[1]);
         evals += 2;
         if fr < simplex[0].1 {
@@ -433,7 +457,7 @@ fn nelder_mead(
             } else {
                 point(&centroid, &worst.0, 0.5)
             };
-            let fc = f(&contracted);
+            let fc = f.at(&contracted);
             evals += 1;
             if fc < worst.1.min(fr) {
                 simplex[n] = (contracted, fc);
@@ -443,7 +467,7 @@ fn nelder_mead(
                     .iter()
                     .map(|s| point(&best, &s.0, 0.5))
                     .collect();
-                let values = values_at(f, &shrunk);
+                let values = f.values(&shrunk);
                 evals += n;
                 for (s, (x, v)) in simplex[1..].iter_mut().zip(shrunk.into_iter().zip(values)) {
                     *s = (x, v);
@@ -482,7 +506,7 @@ fn log_sd(f: Objective, x: &[f64], fx: f64) -> Vec<f64> {
             }
         }
     }
-    let mut values = values_at(f, &points).into_iter();
+    let mut values = f.values(&points).into_iter();
     let mut next = || values.next().unwrap_or(f64::NAN);
     let mut hess = DMatrix::<f64>::zeros(n, n);
     for i in 0..n {
@@ -523,22 +547,32 @@ mod tests {
     #[test]
     fn nelder_mead_finds_a_quadratic_minimum() {
         let f = |x: &[f64]| (x[0] - 1.0).powi(2) + 3.0 * (x[1] + 2.0).powi(2) + x[0] * x[1];
-        let (x, _) = nelder_mead(&f, &[0.0, 0.0], f(&[0.0, 0.0]), 0.5, 1e-6, 500);
-        // Minimum of the quadratic: solve the 2x2 system.
-        let a = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 6.0]);
-        let b = DVector::from_vec(vec![2.0, -12.0]);
-        let want = a.lu().solve(&b).unwrap();
-        assert!(
-            (x[0] - want[0]).abs() < 1e-4 && (x[1] - want[1]).abs() < 1e-4,
-            "{x:?} vs {want}"
-        );
+        for side_by_side in [true, false] {
+            let objective = Objective {
+                f: &f,
+                side_by_side,
+            };
+            let (x, _) = nelder_mead(objective, &[0.0, 0.0], f(&[0.0, 0.0]), 0.5, 1e-6, 500);
+            // Minimum of the quadratic: solve the 2x2 system.
+            let a = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 6.0]);
+            let b = DVector::from_vec(vec![2.0, -12.0]);
+            let want = a.lu().solve(&b).unwrap();
+            assert!(
+                (x[0] - want[0]).abs() < 1e-4 && (x[1] - want[1]).abs() < 1e-4,
+                "{x:?} vs {want}"
+            );
+        }
     }
 
     #[test]
     fn log_sd_inverts_the_curvature() {
         // f = -2 ln L of a Gaussian in x with sd 0.3: f = (x / 0.3)^2.
         let f = |x: &[f64]| (x[0] / 0.3).powi(2) + (x[1] / 0.1).powi(2);
-        let sd = log_sd(&f, &[0.0, 0.0], 0.0);
+        let objective = Objective {
+            f: &f,
+            side_by_side: true,
+        };
+        let sd = log_sd(objective, &[0.0, 0.0], 0.0);
         assert!((sd[0] - 0.3).abs() < 1e-9, "{sd:?}");
         assert!((sd[1] - 0.1).abs() < 1e-9, "{sd:?}");
     }
