@@ -179,7 +179,12 @@ impl ParamValue {
         if self.fixed {
             return "not fitted".to_string();
         }
-        crate::effects::plus_minus(self.value, self.sigma, self.determined, &self.unit, 5)
+        crate::effects::plus_minus(
+            self.value,
+            self.sigma.map(|s| (s, self.determined)),
+            &self.unit,
+            5,
+        )
     }
 }
 

@@ -94,13 +94,7 @@ impl GyropathApp {
                             .sigma
                             .as_ref()
                             .and_then(|u| u.params.get(k).copied().flatten());
-                        ui.label(crate::effects::plus_minus(
-                            *value,
-                            sigma.map(|(sd, _)| sd),
-                            sigma.is_none_or(|(_, determined)| determined),
-                            unit,
-                            5,
-                        ));
+                        ui.label(crate::effects::plus_minus(*value, sigma, unit, 5));
                         ui.end_row();
                     }
                 });

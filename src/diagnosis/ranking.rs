@@ -62,7 +62,12 @@ pub struct Estimate {
 impl Estimate {
     /// "value ± sigma unit", or "not determined by this ride".
     pub fn describe(&self) -> String {
-        crate::effects::plus_minus(self.value, Some(self.sigma), self.determined, &self.unit, 3)
+        crate::effects::plus_minus(
+            self.value,
+            Some((self.sigma, self.determined)),
+            &self.unit,
+            3,
+        )
     }
 }
 

@@ -92,17 +92,13 @@ impl ParamInfo {
 }
 
 /// A value with its 1-sigma for people: "0.97677 ± 0.00083" (then the
-/// unit), or "not determined by this ride" when the sigma says so.
-pub fn plus_minus(
-    value: f64,
-    sigma: Option<f64>,
-    determined: bool,
-    unit: &str,
-    digits: usize,
-) -> String {
+/// unit), or "not determined by this ride" when the sigma does not determine
+/// it (`sigma`: the 1-sigma and whether it determines the value, see
+/// [`ParamInfo::determined`]; `None`: the value alone).
+pub fn plus_minus(value: f64, sigma: Option<(f64, bool)>, unit: &str, digits: usize) -> String {
     match sigma {
-        Some(_) if !determined => format!("{value:.digits$} {unit} (not determined by this ride)"),
-        Some(s) => format!("{value:.digits$} ± {s:.digits$} {unit}"),
+        Some((_, false)) => format!("{value:.digits$} {unit} (not determined by this ride)"),
+        Some((s, true)) => format!("{value:.digits$} ± {s:.digits$} {unit}"),
         None => format!("{value:.digits$} {unit}"),
     }
     .trim_end()
@@ -607,19 +603,19 @@ mod tests {
         assert!(!yaw.determined(f64::NAN));
         assert!(yaw.determined(2.0 / DEG_PER_RAD));
         assert_eq!(
-            plus_minus(0.001, Some(84191.0), yaw.determined(sigma), "deg", 3),
+            plus_minus(0.001, Some((84191.0, yaw.determined(sigma))), "deg", 3),
             "0.001 deg (not determined by this ride)"
         );
         assert_eq!(
-            plus_minus(1.5, Some(0.25), true, "deg", 3),
+            plus_minus(1.5, Some((0.25, true)), "deg", 3),
             "1.500 ± 0.250 deg"
         );
         // No unit, no trailing space; no sigma, the value alone.
         assert_eq!(
-            plus_minus(0.97677, Some(0.00083), true, "", 5),
+            plus_minus(0.97677, Some((0.00083, true)), "", 5),
             "0.97677 ± 0.00083"
         );
-        assert_eq!(plus_minus(2.0, None, true, "m", 1), "2.0 m");
+        assert_eq!(plus_minus(2.0, None, "m", 1), "2.0 m");
         // Unbounded parameters are always shown with their sigma.
         assert!(ParamInfo::new("start_east", "m", 1.0).determined(1e6));
     }

@@ -247,8 +247,8 @@ pub fn estimate(
     let base = model.chain_system(theta, free)?;
     let mut x0 = point(spec);
     // The GPS settings start from the fit's own misfits, not from the
-    // settings as set (3 m and 20 s, typically tens of times off): three
-    // Newton iterations fewer.
+    // settings as set (3 m and 20 s, typically tens of times off): a
+    // shorter search.
     if which.gps
         && let Some((sigma, tau)) = model.gps_noise_guess(theta, &base.linearisation().x)
     {
@@ -439,11 +439,23 @@ fn nelder_mead(
         let worst = simplex[n].clone();
         let reflected = point(&centroid, &worst.0, -1.0);
         let expanded = point(&centroid, &worst.0, -2.0);
-        // The expansion is only used when the reflection is the best point yet.
-        let both = f.values(&[reflected.clone(), expanded.clone()]);
-        let (fr, fe) = (both[0], both[1]);
-        evals += 2;
+        // The expansion is only used when the reflection is the best point
+        // yet: evaluated with it when side by side, else only then.
+        let (fr, speculative) = if f.side_by_side {
+            let both = f.values(&[reflected.clone(), expanded.clone()]);
+            (both[0], Some(both[1]))
+        } else {
+            (f.at(&reflected), None)
+        };
+        evals += 1 + usize::from(speculative.is_some());
         if fr < simplex[0].1 {
+            let fe = match speculative {
+                Some(v) => v,
+                None => {
+                    evals += 1;
+                    f.at(&expanded)
+                }
+            };
             simplex[n] = if fe < fr {
                 (expanded, fe)
             } else {
