@@ -48,7 +48,7 @@ fn main() -> anyhow::Result<()> {
             let mut fit = Reconstruction::new(sig.clone(), settings)?;
             fit.finish();
             let path = fit.trajectory().p;
-            let Some(u) = fit.model().uncertainty(fit.params(), seed) else {
+            let Some(u) = fit.model().uncertainty(fit.params()) else {
                 continue;
             };
             let truth = sim.truth_in(&sig.frame);

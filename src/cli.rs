@@ -427,10 +427,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     }
     physical(&fit)?;
     let uncertainty = (args.out.is_some() || args.report.is_some())
-        .then(|| {
-            fit.model()
-                .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED)
-        })
+        .then(|| fit.model().uncertainty(fit.params()))
         .flatten();
     let elapsed = started.elapsed().as_secs_f64();
     let report = match &uncertainty {
@@ -517,9 +514,7 @@ fn fit_one(
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;
-    let uncertainty = fit
-        .model()
-        .uncertainty(fit.params(), gyropath::model::UNCERTAINTY_SEED);
+    let uncertainty = fit.model().uncertainty(fit.params());
     let elapsed = started.elapsed().as_secs_f64();
     let report = match &uncertainty {
         Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),

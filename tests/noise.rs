@@ -208,10 +208,7 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
         let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
         fit.finish();
         let path = fit.trajectory().p;
-        let u = fit
-            .model()
-            .uncertainty(fit.params(), seed)
-            .expect("uncertainty");
+        let u = fit.model().uncertainty(fit.params()).expect("uncertainty");
         let truth = sim.truth_in(&sig.frame);
         let (mut ride_in, mut ride_n) = (0, 0);
         let (mut out_sigma, mut out_n, mut in_sigma, mut in_n) = (0.0, 0, 0.0, 0);

@@ -507,7 +507,7 @@ impl Worker {
         let model = fit.model();
         let result = match kind {
             ExportKind::PathCsv => {
-                let sigma = model.uncertainty(fit.params(), crate::model::UNCERTAINTY_SEED);
+                let sigma = model.uncertainty(fit.params());
                 write_atomically(path, protect, |w| {
                     write_path_csv(w, model, fit.params(), sigma.as_ref())
                 })
@@ -571,8 +571,7 @@ fn decimated_rows(n: usize) -> Vec<usize> {
 /// The uncertainty of a finished fit at the rows a snapshot draws.
 pub fn finished_uncertainty(fit: &Reconstruction) -> Option<crate::model::Uncertainty> {
     let rows = decimated_rows(fit.model().signals.t.len());
-    fit.model()
-        .uncertainty_at(fit.params(), crate::model::UNCERTAINTY_SEED, Some(&rows))
+    fit.model().uncertainty_at(fit.params(), Some(&rows))
 }
 
 /// Everything the UI draws about the current state of `fit`, with the

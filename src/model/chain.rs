@@ -40,7 +40,6 @@
 use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
 
 use super::normal::{ChainLinearisation, V9};
-use crate::simulation::rng::Rng;
 
 /// Weight of the rows that pin the initial state `s` to zero.
 const PIN: f64 = 1e8;
@@ -65,21 +64,176 @@ pub struct ChainSystem {
     prior_rows: Vec<Vec<(usize, f64)>>,
 }
 
-/// The posterior of the free parameters (see [`ChainSystem::posterior`]).
-pub struct Posterior {
-    /// Parameter index of each row of `global_cov`.
-    pub globals: Vec<usize>,
-    pub global_cov: DMatrix<f64>,
-    /// Deviations of the free parameters, one entry per free column.
-    pub draws: Vec<DVector<f64>>,
+/// Marginal covariances of the free parameters and of the path (see [`ChainSystem::marginals`]).
+pub struct Marginals {
+    /// Variance of every free column (its parameter's internal units).
+    pub var: Vec<f64>,
+    /// By first row: the covariance of what moves the path in each state the rows are seen in.
+    stages: Vec<StageCov>,
+}
+
+/// What moves the path at the rows of one state of the forward pass, and its covariance.
+struct StageCov {
+    first_row: usize,
+    /// The origin `c` of `T` in this state.
+    origin: Vector3<f64>,
+    cols: Vec<StageCol>,
+    /// Per block among `cols`: its first and last row, first column, columns.
+    spans: Vec<(usize, usize, usize, usize)>,
+    p: DMatrix<f64>,
+}
+
+/// A column of a [`StageCov`]: a parameter (with `1 / sqrt(D)`: the unknown is scaled) or `s`.
+#[derive(Clone, Copy, Debug)]
+enum StageCol {
+    Param(usize, f64),
+    S(usize),
+}
+
+impl Marginals {
+    /// The covariance of the path at `row` (at `p`): `H P H^T` with `H` the
+    /// path's derivative with respect to the unknowns of the state it is seen
+    /// in, `dp/dU = [e_k x (p - c)]`, `dp/dT = I` for `s` (every block complete
+    /// before the row), `dp(i)` (the caller's `d p / d theta_i` there) for its
+    /// own block's and the global parameters. As `[var east, var north, var up, cov east-north]`.
+    pub fn path_covariance(
+        &self,
+        row: usize,
+        p: &Vector3<f64>,
+        dp: impl Fn(usize) -> Vector3<f64>,
+    ) -> [f64; 4] {
+        let at = self.stages.partition_point(|s| s.first_row <= row);
+        let Some(st) = at.checked_sub(1).and_then(|k| self.stages.get(k)) else {
+            return [f64::NAN; 4];
+        };
+        // Columns of blocks the row does not lie in stay zero.
+        let mut skip = vec![false; st.cols.len()];
+        for &(first, last, c0, m) in &st.spans {
+            if row < first || row > last {
+                skip[c0..c0 + m].fill(true);
+            }
+        }
+        let rel = p - st.origin;
+        let h: Vec<Vector3<f64>> = st
+            .cols
+            .iter()
+            .zip(&skip)
+            .map(|(c, &skip)| match *c {
+                _ if skip => Vector3::zeros(),
+                StageCol::Param(i, inv) => dp(i) * inv,
+                StageCol::S(k) if k < 3 => Vector3::ith(k, 1.0).cross(&rel),
+                StageCol::S(k) => Vector3::ith(k - 3, 1.0),
+            })
+            .collect();
+        let mut out = [0.0; 4];
+        for (a, ha) in h.iter().enumerate() {
+            if *ha == Vector3::zeros() {
+                continue;
+            }
+            let mut ph = Vector3::zeros();
+            for (b, hb) in h.iter().enumerate() {
+                ph += hb * st.p[(a, b)];
+            }
+            out[0] += ha.x * ph.x;
+            out[1] += ha.y * ph.y;
+            out[2] += ha.z * ph.z;
+            out[3] += ha.x * ph.y;
+        }
+        out
+    }
+}
+
+/// An unknown of the backward pass: a block's column, a component of `s`, a global.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Var {
+    Block(usize, usize),
+    S(usize),
+    G(usize),
+}
+
+/// The covariance `P` of the unknowns of one moment of the backward pass.
+struct CovWalk {
+    labels: Vec<Var>,
+    p: DMatrix<f64>,
+}
+
+impl CovWalk {
+    fn index(&self, v: Var) -> Option<usize> {
+        self.labels.iter().position(|&l| l == v)
+    }
+
+    /// `P <- A P A^T` for `v_old = A v_new`, `A = I + sum (dst, src, a) e_dst e_src^T`
+    /// (no `dst` is a `src`).
+    fn transform(&mut self, terms: &[(Var, Var, f64)]) -> Option<()> {
+        let idx: Vec<(usize, usize, f64)> = terms
+            .iter()
+            .map(|&(d, s, a)| Some((self.index(d)?, self.index(s)?, a)))
+            .collect::<Option<_>>()?;
+        let n = self.p.nrows();
+        for &(d, s, a) in &idx {
+            for c in 0..n {
+                let v = self.p[(s, c)];
+                self.p[(d, c)] += a * v;
+            }
+        }
+        for &(d, s, a) in &idx {
+            for r in 0..n {
+                let v = self.p[(r, s)];
+                self.p[(r, d)] += a * v;
+            }
+        }
+        Some(())
+    }
+
+    /// Block `block` (`m` columns) back as an unknown, from its rows
+    /// `[R_bb | R_rest | z]` over (`block`, `rest`).
+    fn eliminated(
+        &mut self,
+        block: usize,
+        m: usize,
+        rows: &DMatrix<f64>,
+        rest: &[Var],
+    ) -> Option<()> {
+        let rest_idx: Vec<usize> = rest.iter().map(|&v| self.index(v)).collect::<Option<_>>()?;
+        let rbb_inv = rows
+            .view((0, 0), (m, m))
+            .into_owned()
+            .solve_upper_triangular(&DMatrix::identity(m, m))?;
+        let g = -(&rbb_inv * rows.view((0, m), (m, rest.len())));
+        let n = self.p.nrows();
+        // C = G P[rest, :], Var(x_b) = C[:, rest] G^T + R_bb^-1 R_bb^-T.
+        let p_rest = DMatrix::from_fn(rest.len(), n, |r, c| self.p[(rest_idx[r], c)]);
+        let cross = &g * p_rest;
+        let c_rest = DMatrix::from_fn(m, rest.len(), |r, c| cross[(r, rest_idx[c])]);
+        let own = &c_rest * g.transpose() + &rbb_inv * rbb_inv.transpose();
+        let mut p = DMatrix::zeros(n + m, n + m);
+        p.view_mut((0, 0), (n, n)).copy_from(&self.p);
+        p.view_mut((n, 0), (m, n)).copy_from(&cross);
+        p.view_mut((0, n), (n, m)).copy_from(&cross.transpose());
+        p.view_mut((n, n), (m, m)).copy_from(&own);
+        self.p = p;
+        self.labels.extend((0..m).map(|x| Var::Block(block, x)));
+        Some(())
+    }
+
+    /// Keep only the unknowns where `keep` holds (the others marginalised out).
+    fn retain(&mut self, keep: impl Fn(&Var) -> bool) {
+        let idx: Vec<usize> = (0..self.labels.len())
+            .filter(|&k| keep(&self.labels[k]))
+            .collect();
+        if idx.len() == self.labels.len() {
+            return;
+        }
+        self.p = DMatrix::from_fn(idx.len(), idx.len(), |r, c| self.p[(idx[r], idx[c])]);
+        self.labels = idx.iter().map(|&k| self.labels[k]).collect();
+    }
 }
 
 /// What a solve finds: the step, `ln det` of the information matrix, and
-/// the final triangle's block of the global columns (scaled unknowns).
+/// what the forward pass leaves for backward passes.
 struct Solved {
     delta: DVector<f64>,
     log_det: f64,
-    r_globals: DMatrix<f64>,
     forward: Forward,
 }
 
@@ -91,6 +245,29 @@ struct Forward {
     ops: Vec<Op>,
     /// Column scaling `sqrt(D)` of the unknowns.
     scale: Vec<f64>,
+    /// Where the state changed between rows of the path (only when tracked).
+    stages: Vec<StageMark>,
+    /// `ops.len()` when each block was opened.
+    open_at: Vec<usize>,
+    /// The origin of `T` at the end.
+    origin: Vector3<f64>,
+}
+
+/// The first row of the path seen after `ops` changes of the forward pass.
+struct StageMark {
+    first_row: usize,
+    ops: usize,
+}
+
+/// How far the forward pass has gone along the blocks and the rows.
+#[derive(Default)]
+struct Cursor {
+    opened: usize,
+    completed: usize,
+    /// `ops.len()` when each opened block was opened.
+    open_at: Vec<usize>,
+    next_row: usize,
+    stages: Vec<StageMark>,
 }
 
 /// A change made during the forward pass, undone in reverse by the backward pass.
@@ -458,48 +635,180 @@ impl ChainSystem {
     /// rows pinning `s` contribute exactly `PIN^12` (the changes of variables
     /// `s <- s + Y x_b` have determinant 1).
     pub fn solve_with_log_det(&self, lambda: f64) -> Option<(DVector<f64>, f64)> {
-        self.run(lambda).map(|s| (s.delta, s.log_det))
+        self.run(lambda, false).map(|s| (s.delta, s.log_det))
     }
 
-    /// The posterior of the free parameters under the fit's own noise model
-    /// (`N(theta, (J^T J + J_p^T J_p)^-1)`), from one forward pass at zero
-    /// damping, never a dense inverse:
-    /// - the global parameters' covariance exactly: they are the array's last
-    ///   columns, so after the forward pass (every block eliminated by QR, i.e.
-    ///   marginalised exactly) their information is `R_GG^T R_GG` of the final
-    ///   triangle;
-    /// - `draws` draws of the deviation of every free parameter (one entry per
-    ///   free column): back-substitution with standard normal right-hand
-    ///   sides, `R^-1 xi`, O(N + S) each. What the marginal sigmas of the
-    ///   segment biases and of the path are estimated from.
-    pub fn posterior(&self, draws: usize, seed: u64) -> Option<Posterior> {
-        let solved = self.run(0.0)?;
-        let ng = solved.r_globals.nrows();
-        let inv = solved
-            .r_globals
-            .solve_upper_triangular(&DMatrix::identity(ng, ng))?;
-        let mut global_cov = &inv * inv.transpose();
-        for (a, &ia) in self.lin.globals.iter().enumerate() {
-            for (b, &ib) in self.lin.globals.iter().enumerate() {
-                global_cov[(a, b)] /= (self.diag[self.pos[ia]] * self.diag[self.pos[ib]]).sqrt();
+    /// The marginal covariances of the posterior `N(theta, (J^T J + J_p^T J_p)^-1)`
+    /// under the fit's own noise model, from one forward pass at zero damping
+    /// and a backward pass over its changes (Bierman's square-root information
+    /// smoother), never a dense inverse; O(N + S (9 + G)^3).
+    ///
+    /// The backward pass carries the covariance `P` of the unknowns of the
+    /// moment (open blocks, `s`, globals), starting from the final triangle's
+    /// `P = R^-1 R^-T`, and undoes each change of the forward pass:
+    /// - a change of variables `v_old = A v_new` (`s <- s + Y x_b`, a move of
+    ///   the origin of `T`): `P <- A P A^T`;
+    /// - an eliminated block with rows `R_bb x_b + R_br v_rest = xi`:
+    ///   `x_b = G v_rest + R_bb^-1 xi`, `G = -R_bb^-1 R_br`, with `xi` independent
+    ///   of `v_rest`, so `Cov(x_b, v) = G P_rest,v` and
+    ///   `Var(x_b) = G P_rest,rest G^T + R_bb^-1 R_bb^-T`;
+    /// - a block not yet opened at the moment is dropped (marginalised).
+    ///
+    /// Every free column's variance comes out of it; with `track` also, for
+    /// every state the rows of the path are seen in, `P` over what moves the
+    /// path there (its block, `s`, the globals): see [`Marginals::path_covariance`].
+    pub(crate) fn marginals(&self, track: bool) -> Option<Marginals> {
+        let solved = self.run(0.0, track)?;
+        let f = &solved.forward;
+        let lin = &self.lin;
+        let blocks = &lin.blocks;
+        let n = f.rows.nrows();
+        let rinv = f
+            .rows
+            .view((0, 0), (n, n))
+            .into_owned()
+            .solve_upper_triangular(&DMatrix::identity(n, n))?;
+        let mut walk = CovWalk {
+            labels: Vec::with_capacity(n),
+            p: &rinv * rinv.transpose(),
+        };
+        for &(b, m) in &f.open {
+            walk.labels.extend((0..m).map(|x| Var::Block(b, x)));
+        }
+        walk.labels.extend((0..6).map(Var::S));
+        walk.labels.extend((0..lin.globals.len()).map(Var::G));
+        let mut var = vec![f64::NAN; lin.columns.len()];
+        let keep_var = |walk: &CovWalk, var: &mut [f64]| {
+            for (k, l) in walk.labels.iter().enumerate() {
+                let i = match *l {
+                    Var::Block(b, x) => blocks[b].params[x],
+                    Var::G(g) => lin.globals[g],
+                    Var::S(_) => continue,
+                };
+                let c = self.pos[i];
+                if var[c].is_nan() {
+                    var[c] = walk.p[(k, k)] / (f.scale[c] * f.scale[c]);
+                }
+            }
+        };
+        keep_var(&walk, &mut var);
+        let mut stages: Vec<StageCov> = Vec::with_capacity(f.stages.len());
+        let mut origin = f.origin;
+        let mut mark = f.stages.len();
+        let mut store = |walk: &CovWalk, at: usize, origin: Vector3<f64>, mark: &mut usize| {
+            while *mark > 0 && f.stages[*mark - 1].ops >= at {
+                *mark -= 1;
+                let st = &f.stages[*mark];
+                if st.ops == at {
+                    let last_row = f.stages.get(*mark + 1).map_or(lin.horizon, |n| n.first_row);
+                    stages.push(self.stage_cov(walk, st.first_row, last_row, origin, &f.scale));
+                }
+            }
+        };
+        store(&walk, f.ops.len(), origin, &mut mark);
+        for (i, op) in f.ops.iter().enumerate().rev() {
+            match op {
+                Op::Shift(dc) => {
+                    // T_old = T_new + dc x U.
+                    let k = dc.cross_matrix();
+                    let mut terms = Vec::with_capacity(9);
+                    for r in 0..3 {
+                        for c in 0..3 {
+                            terms.push((Var::S(3 + r), Var::S(c), k[(r, c)]));
+                        }
+                    }
+                    walk.transform(&terms)?;
+                    origin -= dc;
+                }
+                Op::Complete { block, y6 } => {
+                    // s_old = s_new - Y x_b.
+                    let mut terms = Vec::with_capacity(6 * y6.len());
+                    for (x, v) in y6.iter().enumerate() {
+                        for (k, &yk) in v.iter().enumerate() {
+                            terms.push((Var::S(k), Var::Block(*block, x), -yk));
+                        }
+                    }
+                    walk.transform(&terms)?;
+                }
+                Op::Eliminate { block, rows, rest } => {
+                    let m = blocks[*block].params.len();
+                    let mut rest_vars: Vec<Var> = Vec::new();
+                    for &b in rest {
+                        rest_vars.extend((0..blocks[b].params.len()).map(|x| Var::Block(b, x)));
+                    }
+                    rest_vars.extend((0..6).map(Var::S));
+                    rest_vars.extend((0..lin.globals.len()).map(Var::G));
+                    walk.eliminated(*block, m, rows, &rest_vars)?;
+                    keep_var(&walk, &mut var);
+                }
+            }
+            // Blocks opened after change `i` are not unknowns before it.
+            walk.retain(|l| match l {
+                Var::Block(b, _) => f.open_at.get(*b).is_some_and(|&at| at <= i),
+                _ => true,
+            });
+            store(&walk, i, origin, &mut mark);
+        }
+        stages.reverse();
+        var.iter()
+            .all(|v| v.is_finite())
+            .then_some(Marginals { var, stages })
+    }
+
+    /// The covariance of what moves the path at rows `first..end` (all seen
+    /// in one state): the blocks those rows lie in, `s` and the globals.
+    fn stage_cov(
+        &self,
+        walk: &CovWalk,
+        first: usize,
+        end: usize,
+        origin: Vector3<f64>,
+        scale: &[f64],
+    ) -> StageCov {
+        let lin = &self.lin;
+        let mut cols: Vec<StageCol> = Vec::new();
+        let mut idx: Vec<usize> = Vec::new();
+        let mut spans = Vec::new();
+        for (k, l) in walk.labels.iter().enumerate() {
+            match *l {
+                Var::Block(b, x) => {
+                    let block = &lin.blocks[b];
+                    if block.first < end && block.last >= first {
+                        if x == 0 {
+                            spans.push((block.first, block.last, cols.len(), block.params.len()));
+                        }
+                        let i = block.params[x];
+                        cols.push(StageCol::Param(i, 1.0 / scale[self.pos[i]]));
+                        idx.push(k);
+                    }
+                }
+                Var::S(_) | Var::G(_) => {}
             }
         }
-        if !global_cov.iter().all(|v| v.is_finite()) {
-            return None;
+        for k in 0..6 {
+            if let Some(at) = walk.index(Var::S(k)) {
+                cols.push(StageCol::S(k));
+                idx.push(at);
+            }
         }
-        let mut rng = Rng::new(seed);
-        let draws = (0..draws)
-            .map(|_| self.backward(&solved.forward, Some(&mut rng)))
-            .collect::<Option<Vec<_>>>()?;
-        Some(Posterior {
-            globals: self.lin.globals.clone(),
-            global_cov,
-            draws,
-        })
+        for (g, &i) in lin.globals.iter().enumerate() {
+            if let Some(at) = walk.index(Var::G(g)) {
+                cols.push(StageCol::Param(i, 1.0 / scale[self.pos[i]]));
+                idx.push(at);
+            }
+        }
+        let p = DMatrix::from_fn(idx.len(), idx.len(), |r, c| walk.p[(idx[r], idx[c])]);
+        StageCov {
+            first_row: first,
+            origin,
+            cols,
+            spans,
+            p,
+        }
     }
 
     /// The forward pass and the backward pass (see the module docs).
-    fn run(&self, lambda: f64) -> Option<Solved> {
+    fn run(&self, lambda: f64, track: bool) -> Option<Solved> {
         let lin = &self.lin;
         let ng = lin.globals.len();
         let scale: Vec<f64> = self.diag.iter().map(|d| d.sqrt()).collect();
@@ -542,8 +851,6 @@ impl ChainSystem {
 
         let blocks = &lin.blocks;
         let nb = blocks.len();
-        let mut next_open = 0;
-        let mut next_complete = 0;
         let open = |work: &mut Work, b: usize| {
             let m = blocks[b].params.len();
             work.open_block(b, m);
@@ -584,21 +891,41 @@ impl ChainSystem {
             }
             ops.push(Op::Complete { block: b, y6 });
         };
+        // Blocks opened and completed so far: every block ending before `row`
+        // completed, every block starting by it open.
+        let mut cursor = Cursor::default();
+        let advance = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor, row: usize| loop {
+            while cursor.completed < cursor.opened && blocks[cursor.completed].last < row {
+                complete(work, ops, cursor.completed);
+                cursor.completed += 1;
+            }
+            if cursor.opened < nb && blocks[cursor.opened].first <= row {
+                cursor.open_at.push(ops.len());
+                open(work, cursor.opened);
+                cursor.opened += 1;
+                eliminate(work, ops, cursor.completed);
+                continue;
+            }
+            break;
+        };
+        // With `track`, the state each row of the path is seen in: as if every
+        // row were an observation (the order of the changes does not change the solution).
+        let track_to = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor, end: usize| {
+            while track && cursor.next_row < end {
+                advance(work, ops, cursor, cursor.next_row);
+                if cursor.stages.last().is_none_or(|s| s.ops != ops.len()) {
+                    cursor.stages.push(StageMark {
+                        first_row: cursor.next_row,
+                        ops: ops.len(),
+                    });
+                }
+                cursor.next_row += 1;
+            }
+        };
         for o in 0..lin.r.len() {
             let row = lin.rows[o];
-            loop {
-                while next_complete < next_open && blocks[next_complete].last < row {
-                    complete(&mut work, &mut ops, next_complete);
-                    next_complete += 1;
-                }
-                if next_open < nb && blocks[next_open].first <= row {
-                    open(&mut work, next_open);
-                    next_open += 1;
-                    eliminate(&mut work, &mut ops, next_complete);
-                    continue;
-                }
-                break;
-            }
+            track_to(&mut work, &mut ops, &mut cursor, row + 1);
+            advance(&mut work, &mut ops, &mut cursor, row);
             let p = lin.at[o];
             if (p - work.origin).norm() > RECENTRE_M {
                 work.compress();
@@ -666,14 +993,16 @@ impl ChainSystem {
                 work.compress();
             }
         }
-        while next_open < nb {
-            while next_complete < next_open && blocks[next_complete].last < lin.horizon {
-                complete(&mut work, &mut ops, next_complete);
-                next_complete += 1;
+        track_to(&mut work, &mut ops, &mut cursor, lin.horizon);
+        while cursor.opened < nb {
+            while cursor.completed < cursor.opened && blocks[cursor.completed].last < lin.horizon {
+                complete(&mut work, &mut ops, cursor.completed);
+                cursor.completed += 1;
             }
-            open(&mut work, next_open);
-            next_open += 1;
-            eliminate(&mut work, &mut ops, next_complete);
+            cursor.open_at.push(ops.len());
+            open(&mut work, cursor.opened);
+            cursor.opened += 1;
+            eliminate(&mut work, &mut ops, cursor.completed);
         }
         work.compress();
 
@@ -689,39 +1018,31 @@ impl ChainSystem {
             log_det += 2.0 * work.rows[(i, i)].abs().ln();
         }
 
-        let g0 = work.g0();
-        let r_globals = work.rows.view((g0, g0), (ng, ng)).into_owned();
-
         let forward = Forward {
             rows: work.rows,
             open: work.open,
             ops,
             scale,
+            stages: cursor.stages,
+            open_at: cursor.open_at,
+            origin: work.origin,
         };
-        let delta = self.backward(&forward, None)?;
+        let delta = self.backward(&forward)?;
         Some(Solved {
             delta,
             log_det,
-            r_globals,
             forward,
         })
     }
 
     /// The backward pass: back-substitution through the final triangle and
     /// the eliminated blocks in reverse, undoing the changes of variables.
-    /// With `noise` the right-hand sides are standard normal draws instead of
-    /// the array's `z`: the result is then a draw of the posterior deviation
-    /// `R^-1 xi`, whose covariance is `(R^T R)^-1`, the posterior covariance
-    /// (at the forward pass's damping; 0 for [`Self::posterior`]).
-    fn backward(&self, f: &Forward, mut noise: Option<&mut Rng>) -> Option<DVector<f64>> {
+    fn backward(&self, f: &Forward) -> Option<DVector<f64>> {
         let lin = &self.lin;
         let blocks = &lin.blocks;
         let nb = blocks.len();
-        let mut rhs = |rows: &DMatrix<f64>, m: usize| -> DVector<f64> {
-            match noise.as_deref_mut() {
-                Some(rng) => DVector::from_fn(m, |_, _| rng.normal()),
-                None => rows.column(rows.ncols() - 1).rows(0, m).into_owned(),
-            }
+        let rhs = |rows: &DMatrix<f64>, m: usize| -> DVector<f64> {
+            rows.column(rows.ncols() - 1).rows(0, m).into_owned()
         };
         let n = f.rows.nrows();
         let last = solve_upper(f.rows.view((0, 0), (n, n)), &rhs(&f.rows, n))?;

@@ -27,13 +27,13 @@ mod start;
 mod sweep;
 mod uncertainty;
 
-pub use chain::{ChainSystem, Posterior};
+pub use chain::{ChainSystem, Marginals};
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
 pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, PathAt, SparsePath, Trajectory};
-pub use uncertainty::{DRAWS, UNCERTAINTY_SEED, Uncertainty};
+pub use uncertainty::Uncertainty;
 
 use std::sync::Arc;
 

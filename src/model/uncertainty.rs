@@ -1,31 +1,25 @@
-//! How sure the fit is of its parameters: 1-sigma uncertainties under the
-//! fit's own noise model (GPS correlation, per-fix accuracy, robust weights,
-//! priors), from the linearisation at the fitted parameters.
+//! How sure the fit is of its parameters and its path: 1-sigma uncertainties
+//! under the fit's own noise model (GPS correlation, per-fix accuracy, robust
+//! weights, priors), from the linearisation at the fitted parameters.
 //!
 //! `Cov(theta) = (J^T J + J_p^T J_p)^-1` with `J` the Jacobian of the whitened
 //! residuals, widened by what correlation the whitened residuals still show
-//! ([`Model::residual_inflation`]). The global parameters' block comes exactly
-//! from the O(N) chain solver's final triangle, the segment biases' and the
-//! path's from posterior draws of the same factorisation
-//! ([`super::ChainSystem::posterior`]); a model without segment biases is
-//! small enough for the dense normal equations.
+//! ([`Model::residual_inflation`]). Its marginals come exactly from the O(N)
+//! chain solver's backward pass ([`super::ChainSystem::marginals`]): every
+//! parameter's variance, and at every row of the path the covariance of what
+//! moves it there, which the path's derivatives (one prefix sweep, see
+//! [`super::jacobian`]) turn into the path's covariance
+//! `Cov(p_j) = H_j P H_j^T`. A model without segment biases is small enough
+//! for the dense normal equations (parameters only).
 
-use nalgebra::{DVector, Vector3};
+use nalgebra::DVector;
 
-use super::{Model, Posterior};
+use super::{Marginals, Model};
 use crate::effects::Role;
 use crate::optimisation::lm::damped_solve;
 
 /// Longest lag (fixes) of the residual autocorrelation that widens the sigmas.
 const MAX_LAG: usize = 120;
-
-/// Posterior draws behind the segment-bias and path sigmas: a sigma from 40
-/// draws is within about 11 % (1 / sqrt(2 k)) of its value.
-pub const DRAWS: usize = 40;
-
-/// Seed of the posterior draws the CLI and the app use: the same fit gives
-/// the same sigmas.
-pub const UNCERTAINTY_SEED: u64 = 1;
 
 /// How sure the fit is of its path and its segment biases.
 #[derive(Clone, Debug, Default)]
@@ -54,17 +48,15 @@ impl Uncertainty {
 
 impl Model {
     /// The 1-sigma uncertainty of every parameter at `theta` (internal units)
-    /// that step 2 fits; `None` for parameters held fixed, for the constant
-    /// bias (step 2 leaves it to the segments: the two are one direction) and
-    /// for the segment biases (their sigmas need posterior draws, see
-    /// [`Self::uncertainty`]).
+    /// that step 2 fits; `None` for parameters held fixed and for the constant
+    /// bias (step 2 leaves it to the segments: the two are one direction).
     pub fn parameter_sigmas(&self, theta: &[f64]) -> Vec<Option<f64>> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let inflation = self.residual_inflation(theta);
         if let Some(chain) = self.chain_system(theta, &free) {
-            return chain.posterior(0, UNCERTAINTY_SEED).map_or_else(
+            return chain.marginals(false).map_or_else(
                 || vec![None; self.n_params()],
-                |p| self.sigmas_of(&p, chain.columns(), inflation),
+                |m| self.sigmas_of(&m, chain.columns(), inflation),
             );
         }
         let mut out = vec![None; self.n_params()];
@@ -77,85 +69,51 @@ impl Model {
         out
     }
 
-    /// Per parameter: the exact sigma of a global one, the draws' root mean
-    /// square of any other free column (`columns`), widened by `inflation`.
-    fn sigmas_of(&self, p: &Posterior, columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
+    /// Per parameter the marginal sigma of its free column (`columns`), widened by `inflation`.
+    fn sigmas_of(&self, m: &Marginals, columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
         let mut out = vec![None; self.n_params()];
-        let k = p.draws.len() as f64;
-        if k > 0.0 {
-            for (c, &i) in columns.iter().enumerate() {
-                let var = p.draws.iter().map(|d| d[c] * d[c]).sum::<f64>() / k;
-                out[i] = Some(inflation * var.sqrt());
-            }
-        }
-        for (a, &i) in p.globals.iter().enumerate() {
-            out[i] = Some(inflation * p.global_cov[(a, a)].max(0.0).sqrt());
+        for (&v, &i) in m.var.iter().zip(columns) {
+            out[i] = Some(inflation * v.max(0.0).sqrt());
         }
         out
     }
 
-    /// The sigmas of every parameter and of the path at every row, from
-    /// [`DRAWS`] posterior draws of the chain solver (exact for the globals,
-    /// see [`Self::parameter_sigmas`]) widened as those, each draw's path
-    /// swept and compared with the fitted one. `None` for a model without
-    /// segment biases (no chain) or when the solve fails.
-    pub fn uncertainty(&self, theta: &[f64], seed: u64) -> Option<Uncertainty> {
-        self.uncertainty_at(theta, seed, None)
+    /// The sigmas of every parameter and the covariance of the path at every
+    /// row, exact under the linearisation (see the module docs) and widened as
+    /// [`Self::parameter_sigmas`]. `None` for a model without segment biases
+    /// (no chain) or when the solve fails.
+    pub fn uncertainty(&self, theta: &[f64]) -> Option<Uncertainty> {
+        self.uncertainty_at(theta, None)
     }
 
     /// [`Self::uncertainty`] with the path's covariance kept only at `rows`
     /// (sorted; `Uncertainty::path[i]` is then row `rows[i]`): what a view
     /// that draws a few thousand points needs, without a long ride's every row.
-    pub fn uncertainty_at(
-        &self,
-        theta: &[f64],
-        seed: u64,
-        rows: Option<&[usize]>,
-    ) -> Option<Uncertainty> {
+    pub fn uncertainty_at(&self, theta: &[f64], rows: Option<&[usize]>) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let chain = self.chain_system(theta, &free)?;
-        let posterior = chain.posterior(DRAWS, seed)?;
+        let marginals = chain.marginals(true)?;
         let inflation = self.residual_inflation(theta);
-        let columns = chain.columns();
-        let params = self.sigmas_of(&posterior, columns, inflation);
-        let draws = &posterior.draws;
-        let k = draws.len() as f64;
-        let n = rows.map_or(self.signals.len(), |r| r.len());
-        // Index into the kept rows of log row `j`.
-        let slot = |j: usize| match rows {
-            None => Some(j),
-            Some(r) => r.binary_search(&j).ok(),
+        let params = self.sigmas_of(&marginals, chain.columns(), inflation);
+        drop(chain);
+        let all: Vec<usize>;
+        let rows = match rows {
+            Some(r) => r,
+            None => {
+                all = (0..self.signals.len()).collect();
+                &all
+            }
         };
-        let mut fitted = vec![Vector3::zeros(); n];
-        self.sweep_from(theta, self.start_of_ride(theta), |j, _, p, _, _| {
-            if let Some(f) = slot(j).and_then(|i| fitted.get_mut(i)) {
-                *f = *p;
+        let widen = inflation * inflation;
+        let mut path = vec![[f64::NAN; 4]; rows.len()];
+        let mut k = 0;
+        self.prefix_sweep(theta, &free, rows, |row, p, _, sums| {
+            while k < rows.len() && rows[k] == row {
+                let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
+                path[k] = c.map(|v| v * widen);
+                k += 1;
             }
         });
-        let mut path = vec![[0.0; 4]; n];
-        let mut drawn = theta.to_vec();
-        for d in draws {
-            for (c, &i) in columns.iter().enumerate() {
-                drawn[i] = theta[i] + inflation * d[c];
-            }
-            self.sweep_from(&drawn, self.start_of_ride(&drawn), |j, _, p, _, _| {
-                let Some(i) = slot(j) else {
-                    return;
-                };
-                if let (Some(acc), Some(f)) = (path.get_mut(i), fitted.get(i)) {
-                    let e: Vector3<f64> = p - f;
-                    acc[0] += e.x * e.x;
-                    acc[1] += e.y * e.y;
-                    acc[2] += e.z * e.z;
-                    acc[3] += e.x * e.y;
-                }
-            });
-        }
-        for v in &mut path {
-            for x in v.iter_mut() {
-                *x /= k;
-            }
-        }
         Some(Uncertainty { params, path })
     }
 
@@ -209,6 +167,70 @@ mod tests {
 
     use super::*;
     use crate::model::ModelSpec;
+
+    /// The backward pass's marginals equal the dense inverse of the full
+    /// normal matrix: every free parameter's variance (segment biases
+    /// included), and at rows along the ride, inside blocks and at their
+    /// edges, the path's covariance `H (J^T J)^-1 H^T` with `H` the path's
+    /// derivative with respect to every free parameter; white and correlated.
+    #[test]
+    fn path_and_parameter_covariances_equal_the_dense_inverse() {
+        for tau in [None, Some(20.0)] {
+            let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
+            let spec = ModelSpec {
+                gps_tau_s: tau,
+                ..ModelSpec::default()
+            };
+            let m = Model::new(sig.clone(), spec).unwrap();
+            let mut p = m.initial_params();
+            for (i, v) in p.iter_mut().enumerate() {
+                *v += 1e-4 * (i as f64).cos();
+            }
+            let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+            let lin = m.linearise(&p, &free);
+            let a = lin.jacobian.transpose() * &lin.jacobian;
+            let inv = a.clone().cholesky().expect("positive definite").inverse();
+            let chain = m.chain_system(&p, &free).expect("chain");
+            assert_eq!(chain.columns(), &lin.columns[..]);
+            let marg = chain.marginals(true).expect("marginals");
+            let close =
+                |x: f64, dense: f64, floor: f64| (x - dense).abs() <= 1e-4 * dense.abs().max(floor);
+            for c in 0..lin.columns.len() {
+                assert!(
+                    close(marg.var[c], inv[(c, c)], 0.0),
+                    "tau {tau:?} column {c}: {} vs {}",
+                    marg.var[c],
+                    inv[(c, c)]
+                );
+            }
+            let rows: Vec<usize> = (1..sig.len()).step_by(37).collect();
+            let mut seen = 0;
+            let mut k = 0;
+            m.prefix_sweep(&p, &free, &rows, |row, pos, _, sums| {
+                if k >= rows.len() || rows[k] != row {
+                    return;
+                }
+                k += 1;
+                let h = nalgebra::DMatrix::from_fn(3, lin.columns.len(), |r, c| {
+                    sums.dp(lin.columns[c], pos)[r]
+                });
+                let dense = &h * &inv * h.transpose();
+                let got = marg.path_covariance(row, pos, |i| sums.dp(i, pos));
+                let floor = 1e-3 * dense[(0, 0)].max(dense[(1, 1)]);
+                for (v, d) in
+                    got.iter()
+                        .zip([dense[(0, 0)], dense[(1, 1)], dense[(2, 2)], dense[(0, 1)]])
+                {
+                    assert!(
+                        close(*v, d, floor.max(1e-12)),
+                        "tau {tau:?} row {row}: {got:?} vs {dense}"
+                    );
+                }
+                seen += 1;
+            });
+            assert!(seen > 200, "{seen} rows");
+        }
+    }
 
     /// The chain's marginal covariance of the globals equals the dense
     /// inverse of the full normal matrix, white and correlated (to 1e-4: the
