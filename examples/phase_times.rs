@@ -1,5 +1,5 @@
 //! Where a fit's time goes: wall time per phase (step 1, step 2, noise
-//! search) of a simulated ride. `cargo run --release --example phase_times -- [minutes] [seed]`.
+//! search) of a simulated ride, and then its uncertainty at every row. `cargo run --release --example phase_times -- [minutes] [seed]`.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -36,14 +36,20 @@ fn main() -> anyhow::Result<()> {
         counts[slot] += 1;
     }
     let evals = rec.noise().map_or(0, |n| n.evaluations);
+    let total = started.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let rows = rec
+        .model()
+        .uncertainty(rec.params())
+        .map_or(0, |u| u.path.len());
+    let uncertainty = t.elapsed().as_secs_f64();
     println!(
-        "{minutes} min seed {seed}: load {load:.3} s, step 1 {:.3} s ({} it), step 2 {:.3} s ({} it), noise {:.3} s ({evals} evals), total {:.3} s, rms {:.3} m",
+        "{minutes} min seed {seed}: load {load:.3} s, step 1 {:.3} s ({} it), step 2 {:.3} s ({} it), noise {:.3} s ({evals} evals), total {total:.3} s, rms {:.3} m; then uncertainty of {rows} rows {uncertainty:.3} s",
         times[0],
         counts[0],
         times[1],
         counts[1],
         times[2],
-        started.elapsed().as_secs_f64(),
         rec.stats().rms_horizontal_m
     );
     if let Some(n) = rec.noise() {

@@ -219,13 +219,12 @@ pub struct FitReport {
 }
 
 impl FitReport {
-    /// The report of `fit`, with the sigmas of its global parameters.
+    /// The report of `fit`, with the sigmas of its parameters.
     pub fn new(fit: &Reconstruction, elapsed_s: f64) -> Self {
         Self::with_sigmas(fit, elapsed_s, fit.model().parameter_sigmas(fit.params()))
     }
 
-    /// The report with the sigmas of `u` (those of the segment biases too,
-    /// from posterior draws, see [`Model::uncertainty`]).
+    /// The report with the sigmas of `u` (see [`Model::uncertainty`]).
     pub fn with_uncertainty(fit: &Reconstruction, elapsed_s: f64, u: &Uncertainty) -> Self {
         Self::with_sigmas(fit, elapsed_s, u.params.clone())
     }

@@ -80,7 +80,8 @@ struct StageCov {
     cols: Vec<StageCol>,
     /// Per block among `cols`: its first and last row, first column, columns.
     spans: Vec<(usize, usize, usize, usize)>,
-    p: DMatrix<f64>,
+    /// A square root of the covariance of `cols`.
+    l: DMatrix<f64>,
 }
 
 /// A column of a [`StageCov`]: a parameter (with `1 / sqrt(D)`: the unknown is scaled) or `s`.
@@ -91,7 +92,7 @@ enum StageCol {
 }
 
 impl Marginals {
-    /// The covariance of the path at `row` (at `p`): `H P H^T` with `H` the
+    /// The covariance of the path at `row` (at `p`): `H P H^T = |H L|^2` with `H` the
     /// path's derivative with respect to the unknowns of the state it is seen
     /// in, `dp/dU = [e_k x (p - c)]`, `dp/dT = I` for `s` (every block complete
     /// before the row), `dp(i)` (the caller's `d p / d theta_i` there) for its
@@ -125,19 +126,17 @@ impl Marginals {
                 StageCol::S(k) => Vector3::ith(k - 3, 1.0),
             })
             .collect();
+        // H L, one column at a time: [var east, var north, var up, cov east-north].
         let mut out = [0.0; 4];
-        for (a, ha) in h.iter().enumerate() {
-            if *ha == Vector3::zeros() {
-                continue;
+        for c in 0..st.l.ncols() {
+            let mut hl = Vector3::zeros();
+            for (r, hr) in h.iter().enumerate() {
+                hl += hr * st.l[(r, c)];
             }
-            let mut ph = Vector3::zeros();
-            for (b, hb) in h.iter().enumerate() {
-                ph += hb * st.p[(a, b)];
-            }
-            out[0] += ha.x * ph.x;
-            out[1] += ha.y * ph.y;
-            out[2] += ha.z * ph.z;
-            out[3] += ha.x * ph.y;
+            out[0] += hl.x * hl.x;
+            out[1] += hl.y * hl.y;
+            out[2] += hl.z * hl.z;
+            out[3] += hl.x * hl.y;
         }
         out
     }
@@ -151,10 +150,15 @@ enum Var {
     G(usize),
 }
 
-/// The covariance `P` of the unknowns of one moment of the backward pass.
+/// The covariance `P = L L^T` of the unknowns of one moment of the backward
+/// pass, kept as a square root `L` (one row per unknown): the changes act on
+/// the rows as they act on a draw of the unknowns, so the rounding grows as it
+/// does for back-substitution. Carried as `P` itself it does not: on a 6-hour
+/// ride the cancellations in `s_old = s_new - Y x_b` made `P` indefinite a
+/// thousand blocks from the end and its entries reach 1e60 by the start.
 struct CovWalk {
     labels: Vec<Var>,
-    p: DMatrix<f64>,
+    l: DMatrix<f64>,
 }
 
 impl CovWalk {
@@ -162,31 +166,27 @@ impl CovWalk {
         self.labels.iter().position(|&l| l == v)
     }
 
-    /// `P <- A P A^T` for `v_old = A v_new`, `A = I + sum (dst, src, a) e_dst e_src^T`
+    /// The variance of unknown `k`.
+    fn var(&self, k: usize) -> f64 {
+        self.l.row(k).norm_squared()
+    }
+
+    /// `L <- A L` for `v_old = A v_new`, `A = I + sum (dst, src, a) e_dst e_src^T`
     /// (no `dst` is a `src`).
     fn transform(&mut self, terms: &[(Var, Var, f64)]) -> Option<()> {
-        let idx: Vec<(usize, usize, f64)> = terms
-            .iter()
-            .map(|&(d, s, a)| Some((self.index(d)?, self.index(s)?, a)))
-            .collect::<Option<_>>()?;
-        let n = self.p.nrows();
-        for &(d, s, a) in &idx {
-            for c in 0..n {
-                let v = self.p[(s, c)];
-                self.p[(d, c)] += a * v;
-            }
-        }
-        for &(d, s, a) in &idx {
-            for r in 0..n {
-                let v = self.p[(r, s)];
-                self.p[(r, d)] += a * v;
+        for &(d, s, a) in terms {
+            let (d, s) = (self.index(d)?, self.index(s)?);
+            for c in 0..self.l.ncols() {
+                let v = self.l[(s, c)];
+                self.l[(d, c)] += a * v;
             }
         }
         Some(())
     }
 
     /// Block `block` (`m` columns) back as an unknown, from its rows
-    /// `[R_bb | R_rest | z]` over (`block`, `rest`).
+    /// `[R_bb | R_rest | z]` over (`block`, `rest`): `x_b = G v_rest + R_bb^-1 xi`,
+    /// so its rows of `L` are `G L_rest` and, in `m` new columns (`xi`), `R_bb^-1`.
     fn eliminated(
         &mut self,
         block: usize,
@@ -200,19 +200,15 @@ impl CovWalk {
             .into_owned()
             .solve_upper_triangular(&DMatrix::identity(m, m))?;
         let g = -(&rbb_inv * rows.view((0, m), (m, rest.len())));
-        let n = self.p.nrows();
-        // C = G P[rest, :], Var(x_b) = C[:, rest] G^T + R_bb^-1 R_bb^-T.
-        let p_rest = DMatrix::from_fn(rest.len(), n, |r, c| self.p[(rest_idx[r], c)]);
-        let cross = &g * p_rest;
-        let c_rest = DMatrix::from_fn(m, rest.len(), |r, c| cross[(r, rest_idx[c])]);
-        let own = &c_rest * g.transpose() + &rbb_inv * rbb_inv.transpose();
-        let mut p = DMatrix::zeros(n + m, n + m);
-        p.view_mut((0, 0), (n, n)).copy_from(&self.p);
-        p.view_mut((n, 0), (m, n)).copy_from(&cross);
-        p.view_mut((0, n), (n, m)).copy_from(&cross.transpose());
-        p.view_mut((n, n), (m, m)).copy_from(&own);
-        self.p = p;
+        let (n, k) = self.l.shape();
+        let l_rest = DMatrix::from_fn(rest.len(), k, |r, c| self.l[(rest_idx[r], c)]);
+        let mut l = DMatrix::zeros(n + m, k + m);
+        l.view_mut((0, 0), (n, k)).copy_from(&self.l);
+        l.view_mut((n, 0), (m, k)).copy_from(&(&g * l_rest));
+        l.view_mut((n, k), (m, m)).copy_from(&rbb_inv);
+        self.l = l;
         self.labels.extend((0..m).map(|x| Var::Block(block, x)));
+        self.compress();
         Some(())
     }
 
@@ -224,9 +220,28 @@ impl CovWalk {
         if idx.len() == self.labels.len() {
             return;
         }
-        self.p = DMatrix::from_fn(idx.len(), idx.len(), |r, c| self.p[(idx[r], idx[c])]);
+        self.l = self.l.select_rows(&idx);
         self.labels = idx.iter().map(|&k| self.labels[k]).collect();
+        self.compress();
     }
+
+    /// `L` with no more columns than rows: `L^T = Q R` gives `L L^T = R^T R`.
+    fn compress(&mut self) {
+        self.l = square_root(&self.l);
+    }
+
+    /// A square root of the covariance of the unknowns at `idx`.
+    fn select(&self, idx: &[usize]) -> DMatrix<f64> {
+        square_root(&self.l.select_rows(idx))
+    }
+}
+
+/// `S` (rows x rows at most) with `S S^T = L L^T`.
+fn square_root(l: &DMatrix<f64>) -> DMatrix<f64> {
+    if l.ncols() <= l.nrows() {
+        return l.clone();
+    }
+    l.transpose().qr().r().transpose()
 }
 
 /// What a solve finds: the step, `ln det` of the information matrix, and
@@ -644,8 +659,9 @@ impl ChainSystem {
     /// smoother), never a dense inverse; O(N + S (9 + G)^3).
     ///
     /// The backward pass carries the covariance `P` of the unknowns of the
-    /// moment (open blocks, `s`, globals), starting from the final triangle's
-    /// `P = R^-1 R^-T`, and undoes each change of the forward pass:
+    /// moment (open blocks, `s`, globals), as a square root (see [`CovWalk`]),
+    /// starting from the final triangle's `P = R^-1 R^-T`, and undoes each
+    /// change of the forward pass:
     /// - a change of variables `v_old = A v_new` (`s <- s + Y x_b`, a move of
     ///   the origin of `T`): `P <- A P A^T`;
     /// - an eliminated block with rows `R_bb x_b + R_br v_rest = xi`:
@@ -670,7 +686,7 @@ impl ChainSystem {
             .solve_upper_triangular(&DMatrix::identity(n, n))?;
         let mut walk = CovWalk {
             labels: Vec::with_capacity(n),
-            p: &rinv * rinv.transpose(),
+            l: rinv,
         };
         for &(b, m) in &f.open {
             walk.labels.extend((0..m).map(|x| Var::Block(b, x)));
@@ -687,7 +703,7 @@ impl ChainSystem {
                 };
                 let c = self.pos[i];
                 if var[c].is_nan() {
-                    var[c] = walk.p[(k, k)] / (f.scale[c] * f.scale[c]);
+                    var[c] = walk.var(k) / (f.scale[c] * f.scale[c]);
                 }
             }
         };
@@ -797,13 +813,12 @@ impl ChainSystem {
                 idx.push(at);
             }
         }
-        let p = DMatrix::from_fn(idx.len(), idx.len(), |r, c| walk.p[(idx[r], idx[c])]);
         StageCov {
             first_row: first,
             origin,
             cols,
             spans,
-            p,
+            l: walk.select(&idx),
         }
     }
 
