@@ -232,6 +232,24 @@ mod tests {
         }
     }
 
+    /// On a long ride the backward pass stays sane: every row's horizontal
+    /// sigma positive and below 30 m (at the unfitted parameters), every parameter's variance positive.
+    /// (Carried as `P` instead of a square root, the covariance went
+    /// indefinite about an hour from the end and reached 1e60.)
+    #[test]
+    fn the_backward_pass_stays_sane_on_a_long_ride() {
+        let sig = Arc::new(crate::testing::simulated_signals(5, 7200.0, &[]));
+        let m = Model::new(sig.clone(), ModelSpec::default()).unwrap();
+        let p = m.initial_params();
+        let u = m.uncertainty(&p).expect("uncertainty");
+        for j in (0..sig.len()).step_by(50) {
+            let [e, n, _] = u.sigma_enu(j);
+            let h = (e * e + n * n).sqrt();
+            assert!(h > 0.0 && h < 30.0, "row {j}: sigma {h} m");
+        }
+        assert!(u.params.iter().flatten().all(|s| s.is_finite() && *s > 0.0));
+    }
+
     /// The chain's marginal covariance of the globals equals the dense
     /// inverse of the full normal matrix, white and correlated (to 1e-4: the
     /// rows pinning the chain's state carry a finite weight, see `chain`).
