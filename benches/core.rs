@@ -5,6 +5,7 @@ use std::hint::black_box;
 use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use gyropath::diagnosis::{Folds, diagnose};
 use gyropath::import::parse;
 use gyropath::model::{Model, ModelSpec};
 use gyropath::optimisation::{FitSettings, Reconstruction};
@@ -57,7 +58,28 @@ fn bench(c: &mut Criterion) {
                 fit.stats().rms_horizontal_m
             })
         });
+        if minutes == 30.0 {
+            // The fitted path's sigma at every row (issue 14): the chain's backward pass and one prefix sweep.
+            let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+            fit.finish();
+            g.bench_function(format!("uncertainty/{label}"), |b| {
+                b.iter(|| fit.model().uncertainty(black_box(fit.params())).unwrap())
+            });
+        }
     }
+    // `gyropath diagnose` without its printing (issue 13's target: 4 s on 20 minutes).
+    let (_, sig) = ride(20.0);
+    g.bench_function("diagnose/20min", |b| {
+        b.iter(|| {
+            diagnose(
+                sig.clone(),
+                &FitSettings::default(),
+                &Folds::default(),
+                &|_| {},
+            )
+            .unwrap()
+        })
+    });
     // The naive gradient: one finite difference per parameter (what the O(N)
     // sweep replaces), on the 15-minute ride, for 20 parameters -> scale by P/20.
     let (_, sig) = ride(15.0);
