@@ -64,6 +64,28 @@ pub struct ChainSystem {
     prior_rows: Vec<Vec<(usize, f64)>>,
 }
 
+/// The rows of the path whose covariance [`ChainSystem::marginals`] prepares.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum PathRows<'a> {
+    None,
+    All,
+    /// These rows (sorted).
+    Only(&'a [usize]),
+}
+
+impl PathRows<'_> {
+    /// Whether any of the rows is in `first..end`.
+    fn wants(&self, first: usize, end: usize) -> bool {
+        match self {
+            PathRows::None => false,
+            PathRows::All => true,
+            PathRows::Only(r) => r
+                .get(r.partition_point(|&x| x < first))
+                .is_some_and(|&x| x < end),
+        }
+    }
+}
+
 /// Marginal covariances of the free parameters and of the path (see [`ChainSystem::marginals`]).
 pub struct Marginals {
     /// Variance of every free column (its parameter's internal units).
@@ -670,11 +692,13 @@ impl ChainSystem {
     ///   `Var(x_b) = G P_rest,rest G^T + R_bb^-1 R_bb^-T`;
     /// - a block not yet opened at the moment is dropped (marginalised).
     ///
-    /// Every free column's variance comes out of it; with `track` also, for
-    /// every state the rows of the path are seen in, `P` over what moves the
-    /// path there (its block, `s`, the globals): see [`Marginals::path_covariance`].
-    pub(crate) fn marginals(&self, track: bool) -> Option<Marginals> {
-        let solved = self.run(0.0, track)?;
+    /// Every free column's variance comes out of it; for `rows` also, for
+    /// every state they are seen in, `P` over what moves the path there (its
+    /// block, `s`, the globals): see [`Marginals::path_covariance`]. About
+    /// 2.5 kB per state: 29 MB for every row of a 6-hour ride, a few MB for
+    /// the few thousand rows a view draws.
+    pub(crate) fn marginals(&self, rows: PathRows) -> Option<Marginals> {
+        let solved = self.run(0.0, !matches!(rows, PathRows::None))?;
         let f = &solved.forward;
         let lin = &self.lin;
         let blocks = &lin.blocks;
@@ -715,9 +739,9 @@ impl ChainSystem {
             while *mark > 0 && f.stages[*mark - 1].ops >= at {
                 *mark -= 1;
                 let st = &f.stages[*mark];
-                if st.ops == at {
-                    let last_row = f.stages.get(*mark + 1).map_or(lin.horizon, |n| n.first_row);
-                    stages.push(self.stage_cov(walk, st.first_row, last_row, origin, &f.scale));
+                let end = f.stages.get(*mark + 1).map_or(lin.horizon, |n| n.first_row);
+                if st.ops == at && rows.wants(st.first_row, end) {
+                    stages.push(self.stage_cov(walk, st.first_row, end, origin, &f.scale));
                 }
             }
         };

@@ -14,6 +14,7 @@
 
 use nalgebra::DVector;
 
+use super::chain::PathRows;
 use super::{Marginals, Model};
 use crate::effects::Role;
 use crate::optimisation::lm::damped_solve;
@@ -54,7 +55,7 @@ impl Model {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let inflation = self.residual_inflation(theta);
         if let Some(chain) = self.chain_system(theta, &free) {
-            return chain.marginals(false).map_or_else(
+            return chain.marginals(PathRows::None).map_or_else(
                 || vec![None; self.n_params()],
                 |m| self.sigmas_of(&m, chain.columns(), inflation),
             );
@@ -92,7 +93,7 @@ impl Model {
     pub fn uncertainty_at(&self, theta: &[f64], rows: Option<&[usize]>) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let chain = self.chain_system(theta, &free)?;
-        let marginals = chain.marginals(true)?;
+        let marginals = chain.marginals(rows.map_or(PathRows::All, PathRows::Only))?;
         let inflation = self.residual_inflation(theta);
         let params = self.sigmas_of(&marginals, chain.columns(), inflation);
         drop(chain);
@@ -192,7 +193,7 @@ mod tests {
             let inv = a.clone().cholesky().expect("positive definite").inverse();
             let chain = m.chain_system(&p, &free).expect("chain");
             assert_eq!(chain.columns(), &lin.columns[..]);
-            let marg = chain.marginals(true).expect("marginals");
+            let marg = chain.marginals(PathRows::All).expect("marginals");
             let close =
                 |x: f64, dense: f64, floor: f64| (x - dense).abs() <= 1e-4 * dense.abs().max(floor);
             for c in 0..lin.columns.len() {
