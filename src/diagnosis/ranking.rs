@@ -373,6 +373,10 @@ fn estimates(
             continue;
         }
         for i in model.range(e) {
+            if effect.fixed(i - model.range(e).start) {
+                // Held, not estimated (a planar model's roll and pitch parts).
+                continue;
+            }
             let (_, info) = &infos[i];
             let sigma = ne
                 .columns

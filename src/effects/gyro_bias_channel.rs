@@ -39,6 +39,8 @@ pub struct GyroBiasChannel {
     centred: Vec<f64>,
     /// Prior weight `s_c / 0.5 deg/s` (per rad/s of slope).
     prior_weight: f64,
+    /// A planar model holds the roll and pitch slopes (see `GyroScale::planar`).
+    planar: bool,
 }
 
 /// Prior standard deviation of the bias a channel explains (deg/s).
@@ -73,6 +75,7 @@ impl GyroBiasChannel {
             channel: channel.to_string(),
             centred,
             prior_weight: std / (PRIOR_BIAS_DPS / DEG_PER_RAD),
+            planar: signals.attitude.is_planar(),
         })
     }
 }
@@ -95,6 +98,10 @@ impl Effect for GyroBiasChannel {
 
     fn role(&self) -> Role {
         Role::Step2Only
+    }
+
+    fn fixed(&self, i: usize) -> bool {
+        self.planar && i < 2
     }
 
     fn acts_on_gyro(&self) -> bool {

@@ -21,7 +21,12 @@ use super::{Columns, Effect, GyroPartials, ParamInfo, PriorRows};
 use crate::model::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
-pub struct GyroScale;
+pub struct GyroScale {
+    /// A planar model turns about the vertical only: the roll and pitch
+    /// factors act on nothing it integrates and are held, as its roll and
+    /// pitch biases are (fitted, they would print the prior's 5 % as a sigma).
+    pub planar: bool,
+}
 
 /// Prior standard deviation of each scale-factor error.
 const PRIOR_SIGMA: f64 = 0.05;
@@ -40,6 +45,10 @@ impl Effect for GyroScale {
 
     fn initial(&self, _guess: &StartGuess) -> Vec<f64> {
         vec![0.0; 3]
+    }
+
+    fn fixed(&self, i: usize) -> bool {
+        self.planar && i < 2
     }
 
     fn acts_on_gyro(&self) -> bool {
@@ -114,11 +123,11 @@ mod tests {
     fn partials_match_finite_differences() {
         let p = [0.03, -0.02, 0.045];
         crate::effects::testing::check_gyro_partials(
-            &GyroScale,
+            &GyroScale::default(),
             &p,
             5,
             Vector3::new(0.4, -0.2, 0.9),
         );
-        crate::effects::testing::check_batches(&GyroScale, &p, 300);
+        crate::effects::testing::check_batches(&GyroScale::default(), &p, 300);
     }
 }

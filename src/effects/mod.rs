@@ -493,7 +493,9 @@ pub fn build(
                 Box::new(BaroDrift)
             }
         }
-        "gyro_scale" => Box::new(GyroScale),
+        "gyro_scale" => Box::new(GyroScale {
+            planar: signals.attitude.is_planar(),
+        }),
         "mount_misalignment" => Box::new(MountMisalignment),
         "gps_lag" => Box::new(GpsLag),
         "gps_outliers" => Box::new(GpsOutliers::new(signals, spec.sigma_horizontal_m)),
