@@ -169,6 +169,34 @@ mod tests {
     use super::*;
     use crate::model::ModelSpec;
 
+    /// A 90-second ride's model at slightly perturbed starting values, its
+    /// free mask, its dense linearisation and `(J^T J)^-1`.
+    fn dense_case(
+        tau: Option<f64>,
+    ) -> (
+        Model,
+        Vec<f64>,
+        Vec<bool>,
+        crate::model::Linearisation,
+        nalgebra::DMatrix<f64>,
+    ) {
+        let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
+        let spec = ModelSpec {
+            gps_tau_s: tau,
+            ..ModelSpec::default()
+        };
+        let m = Model::new(sig, spec).unwrap();
+        let mut p = m.initial_params();
+        for (i, v) in p.iter_mut().enumerate() {
+            *v += 1e-4 * (i as f64).cos();
+        }
+        let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let lin = m.linearise(&p, &free);
+        let a = lin.jacobian.transpose() * &lin.jacobian;
+        let inv = a.cholesky().expect("positive definite").inverse();
+        (m, p, free, lin, inv)
+    }
+
     /// The backward pass's marginals equal the dense inverse of the full
     /// normal matrix: every free parameter's variance (segment biases
     /// included), and at rows along the ride, inside blocks and at their
@@ -177,20 +205,8 @@ mod tests {
     #[test]
     fn path_and_parameter_covariances_equal_the_dense_inverse() {
         for tau in [None, Some(20.0)] {
-            let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
-            let spec = ModelSpec {
-                gps_tau_s: tau,
-                ..ModelSpec::default()
-            };
-            let m = Model::new(sig.clone(), spec).unwrap();
-            let mut p = m.initial_params();
-            for (i, v) in p.iter_mut().enumerate() {
-                *v += 1e-4 * (i as f64).cos();
-            }
-            let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-            let lin = m.linearise(&p, &free);
-            let a = lin.jacobian.transpose() * &lin.jacobian;
-            let inv = a.clone().cholesky().expect("positive definite").inverse();
+            let (m, p, free, lin, inv) = dense_case(tau);
+            let sig = m.signals.clone();
             let chain = m.chain_system(&p, &free).expect("chain");
             assert_eq!(chain.columns(), &lin.columns[..]);
             let marg = chain.marginals(PathRows::All).expect("marginals");
@@ -257,20 +273,7 @@ mod tests {
     #[test]
     fn global_sigmas_from_the_chain_equal_the_dense_inverse() {
         for tau in [None, Some(20.0)] {
-            let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
-            let spec = ModelSpec {
-                gps_tau_s: tau,
-                ..ModelSpec::default()
-            };
-            let m = Model::new(sig, spec).unwrap();
-            let mut p = m.initial_params();
-            for (i, v) in p.iter_mut().enumerate() {
-                *v += 1e-4 * (i as f64).cos();
-            }
-            let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-            let lin = m.linearise(&p, &free);
-            let a = lin.jacobian.transpose() * &lin.jacobian;
-            let inv = a.clone().cholesky().expect("positive definite").inverse();
+            let (m, p, _, lin, inv) = dense_case(tau);
             let inflation = m.residual_inflation(&p);
             let sigmas: Vec<Option<f64>> = m
                 .parameter_sigmas(&p)
