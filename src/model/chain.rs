@@ -266,10 +266,9 @@ fn square_root(l: &DMatrix<f64>) -> DMatrix<f64> {
     l.transpose().qr().r().transpose()
 }
 
-/// What a solve finds: the step, `ln det` of the information matrix, and
-/// what the forward pass leaves for backward passes.
+/// What the forward pass finds: `ln det` of the information matrix, and what
+/// it leaves for a backward pass.
 struct Solved {
-    delta: DVector<f64>,
     log_det: f64,
     forward: Forward,
 }
@@ -672,7 +671,8 @@ impl ChainSystem {
     /// rows pinning `s` contribute exactly `PIN^12` (the changes of variables
     /// `s <- s + Y x_b` have determinant 1).
     pub fn solve_with_log_det(&self, lambda: f64) -> Option<(DVector<f64>, f64)> {
-        self.run(lambda, false).map(|s| (s.delta, s.log_det))
+        let solved = self.run(lambda, false)?;
+        Some((self.backward(&solved.forward)?, solved.log_det))
     }
 
     /// The marginal covariances of the posterior `N(theta, (J^T J + J_p^T J_p)^-1)`
@@ -846,7 +846,7 @@ impl ChainSystem {
         }
     }
 
-    /// The forward pass and the backward pass (see the module docs).
+    /// The forward pass (see the module docs); the step is its back-substitution.
     fn run(&self, lambda: f64, track: bool) -> Option<Solved> {
         let lin = &self.lin;
         let ng = lin.globals.len();
@@ -933,16 +933,19 @@ impl ChainSystem {
         // Blocks opened and completed so far: every block ending before `row`
         // completed, every block starting by it open.
         let mut cursor = Cursor::default();
+        let open_next = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor| {
+            cursor.open_at.push(ops.len());
+            open(work, cursor.opened);
+            cursor.opened += 1;
+            eliminate(work, ops, cursor.completed);
+        };
         let advance = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor, row: usize| loop {
             while cursor.completed < cursor.opened && blocks[cursor.completed].last < row {
                 complete(work, ops, cursor.completed);
                 cursor.completed += 1;
             }
             if cursor.opened < nb && blocks[cursor.opened].first <= row {
-                cursor.open_at.push(ops.len());
-                open(work, cursor.opened);
-                cursor.opened += 1;
-                eliminate(work, ops, cursor.completed);
+                open_next(work, ops, cursor);
                 continue;
             }
             break;
@@ -1038,10 +1041,7 @@ impl ChainSystem {
                 complete(&mut work, &mut ops, cursor.completed);
                 cursor.completed += 1;
             }
-            cursor.open_at.push(ops.len());
-            open(&mut work, cursor.opened);
-            cursor.opened += 1;
-            eliminate(&mut work, &mut ops, cursor.completed);
+            open_next(&mut work, &mut ops, &mut cursor);
         }
         work.compress();
 
@@ -1066,12 +1066,7 @@ impl ChainSystem {
             open_at: cursor.open_at,
             origin: work.origin,
         };
-        let delta = self.backward(&forward)?;
-        Some(Solved {
-            delta,
-            log_det,
-            forward,
-        })
+        Some(Solved { log_det, forward })
     }
 
     /// The backward pass: back-substitution through the final triangle and
