@@ -60,16 +60,19 @@ impl Model {
         let mut g_rate = vec![Vector3::zeros(); n];
         let mut g_dist = vec![0.0; n];
 
-        // d C / d x_k of every observation: 2 r_k on its own x and, through a
-        // whitened residual, on the previous fix's x too (see `noise`).
+        // d C / d x_k of every observation: 2 r_k on its own x and, through
+        // the filtered wander the later residuals subtract, on theirs (see
+        // `noise`): backwards, `g_z` the cost's derivative by `z_k`.
         let values = Whitener::new(&plan, obs)
             .all((0..obs.len()).map(|k| plan.x(k, obs[k].axis, &path.p[k], &path.delta[k])));
         let mut g_x = vec![0.0; obs.len()];
-        for (k, v) in values.iter().enumerate() {
+        let mut g_z = vec![0.0; obs.len()];
+        for (k, v) in values.iter().enumerate().rev() {
             cost += v.r * v.r;
-            g_x[k] += 2.0 * v.r * v.slope;
-            if let Some(j) = plan.links[k].prev {
-                g_x[j] += 2.0 * v.r * v.back;
+            let link = plan.links[k];
+            g_x[k] = 2.0 * v.r * v.slope + g_z[k] * link.kappa;
+            if let Some(j) = link.prev {
+                g_z[j] += 2.0 * v.r * v.back + g_z[k] * link.alpha;
             }
         }
 

@@ -44,6 +44,12 @@ use super::normal::{ChainLinearisation, V9};
 /// Weight of the rows that pin the initial state `s` to zero.
 const PIN: f64 = 1e8;
 
+/// Weight of the rows that define a wander unknown, relative to the row that
+/// reads it: heavy enough to be a constraint (1e-10 of the solution), light
+/// enough to keep the light rows' digits through the QR (at 1e8 the step lost
+/// them: 3e-6 from the dense one).
+const WANDER_PIN: f64 = 1e5;
+
 /// Re-centre the rotation terms when an observation is this far from the origin (m).
 const RECENTRE_M: f64 = 50.0;
 
@@ -164,12 +170,14 @@ impl Marginals {
     }
 }
 
-/// An unknown of the backward pass: a block's column, a component of `s`, a global.
+/// An unknown of the backward pass: a block's column, a component of `s`, a
+/// global, an observation's wander.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Var {
     Block(usize, usize),
     S(usize),
     G(usize),
+    Z(usize),
 }
 
 /// The covariance `P = L L^T` of the unknowns of one moment of the backward
@@ -206,16 +214,11 @@ impl CovWalk {
         Some(())
     }
 
-    /// Block `block` (`m` columns) back as an unknown, from its rows
-    /// `[R_bb | R_rest | z]` over (`block`, `rest`): `x_b = G v_rest + R_bb^-1 xi`,
+    /// An eliminated unknown (its columns `new`) back, from its rows
+    /// `[R_bb | R_rest | z]` over (`new`, `rest`): `x_b = G v_rest + R_bb^-1 xi`,
     /// so its rows of `L` are `G L_rest` and, in `m` new columns (`xi`), `R_bb^-1`.
-    fn eliminated(
-        &mut self,
-        block: usize,
-        m: usize,
-        rows: &DMatrix<f64>,
-        rest: &[Var],
-    ) -> Option<()> {
+    fn eliminated(&mut self, new: &[Var], rows: &DMatrix<f64>, rest: &[Var]) -> Option<()> {
+        let m = new.len();
         let rest_idx: Vec<usize> = rest.iter().map(|&v| self.index(v)).collect::<Option<_>>()?;
         let rbb_inv = rows
             .view((0, 0), (m, m))
@@ -229,7 +232,7 @@ impl CovWalk {
         l.view_mut((n, 0), (m, k)).copy_from(&(&g * l_rest));
         l.view_mut((n, k), (m, m)).copy_from(&rbb_inv);
         self.l = l;
-        self.labels.extend((0..m).map(|x| Var::Block(block, x)));
+        self.labels.extend_from_slice(new);
         self.compress();
         Some(())
     }
@@ -275,9 +278,9 @@ struct Solved {
 
 /// What the forward pass leaves for the backward pass.
 struct Forward {
-    /// The final triangle `[R | z]` over (open blocks, `s`, globals).
+    /// The final triangle `[R | z]` over (`front`, `s`, globals).
     rows: DMatrix<f64>,
-    open: Vec<(usize, usize)>,
+    front: Vec<Unknown>,
     ops: Vec<Op>,
     /// Column scaling `sqrt(D)` of the unknowns.
     scale: Vec<f64>,
@@ -285,6 +288,8 @@ struct Forward {
     stages: Vec<StageMark>,
     /// `ops.len()` when each block was opened.
     open_at: Vec<usize>,
+    /// `ops.len()` when each observation's wander was added (`usize::MAX`: never).
+    wander_at: Vec<usize>,
     /// The origin of `T` at the end.
     origin: Vector3<f64>,
 }
@@ -306,23 +311,36 @@ struct Cursor {
     stages: Vec<StageMark>,
 }
 
+/// An unknown of the array ahead of `s`: a block, or the filtered GPS
+/// wander `z_o` an observation passes on to the next (see [`super::noise`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Unknown {
+    Block(usize),
+    /// Numbered in the order the forward pass adds them.
+    Wander(usize),
+}
+
 /// A change made during the forward pass, undone in reverse by the backward pass.
 enum Op {
     /// The origin of `T` moved by `dc`.
     Shift(Vector3<f64>),
     /// Block `b` ended: `s += sum_x y6[x] x_b[x]`.
     Complete { block: usize, y6: Vec<[f64; 6]> },
-    /// Block `b` was eliminated: `rows = [R_bb | R_rest | z]` over (b, then `rest` blocks, `s`, globals).
+    /// An unknown was eliminated: `rows = [R_uu | R_rest | z]` over (`what`,
+    /// then `rest`, `s`, globals).
     Eliminate {
-        block: usize,
+        what: Unknown,
         rows: DMatrix<f64>,
-        rest: Vec<usize>,
+        rest: Vec<Unknown>,
     },
 }
 
 /// The information array of the forward pass.
 struct Work {
-    /// Open blocks in column order, with their number of columns.
+    /// Wander unknowns in column order (first in the array, at most one per
+    /// linked axis at a time), with the observation each belongs to.
+    wander: Vec<usize>,
+    /// Open blocks in column order (after the wander), with their number of columns.
     open: Vec<(usize, usize)>,
     ng: usize,
     /// Rows of `[R | z]`, `n + 1` columns.
@@ -330,32 +348,28 @@ struct Work {
     /// Rows waiting to be folded in.
     pending: Vec<Vec<f64>>,
     origin: Vector3<f64>,
-    /// Rows `d x_o` (no right-hand side) of observations that a later,
-    /// whitened residual also depends on: kept in the current unknowns through
-    /// every change of variables until that residual is added.
-    shadows: Vec<(usize, Vec<f64>)>,
 }
 
 impl Work {
-    fn block_cols(&self) -> usize {
-        self.open.iter().map(|&(_, m)| m).sum()
+    fn front_cols(&self) -> usize {
+        self.wander.len() + self.open.iter().map(|&(_, m)| m).sum::<usize>()
     }
 
     fn n(&self) -> usize {
-        self.block_cols() + 6 + self.ng
+        self.front_cols() + 6 + self.ng
     }
 
     fn s0(&self) -> usize {
-        self.block_cols()
+        self.front_cols()
     }
 
     fn g0(&self) -> usize {
-        self.block_cols() + 6
+        self.front_cols() + 6
     }
 
     /// First column of open block `b`.
     fn col_of(&self, b: usize) -> Option<usize> {
-        let mut c = 0;
+        let mut c = self.wander.len();
         for &(ob, m) in &self.open {
             if ob == b {
                 return Some(c);
@@ -363,6 +377,20 @@ impl Work {
             c += m;
         }
         None
+    }
+
+    /// Column of the wander of observation `o`.
+    fn wander_col(&self, o: usize) -> Option<usize> {
+        self.wander.iter().position(|&w| w == o)
+    }
+
+    /// The unknowns ahead of `s`, in column order.
+    fn front(&self) -> Vec<Unknown> {
+        self.wander
+            .iter()
+            .map(|&o| Unknown::Wander(o))
+            .chain(self.open.iter().map(|&(b, _)| Unknown::Block(b)))
+            .collect()
     }
 
     /// Fold the pending rows into an upper-triangular `n x (n + 1)` array.
@@ -382,10 +410,8 @@ impl Work {
         self.rows = stack.rows(0, n).into_owned();
     }
 
-    /// Add `m` zero columns for block `b` after the open blocks.
-    fn open_block(&mut self, b: usize, m: usize) {
-        self.compress();
-        let at = self.block_cols();
+    /// Insert `m` zero columns at column `at` (the array and the pending rows).
+    fn insert_cols(&mut self, at: usize, m: usize) {
         let old = std::mem::replace(&mut self.rows, DMatrix::zeros(0, 0));
         let n_old = old.ncols();
         let mut new = DMatrix::<f64>::zeros(old.nrows(), n_old + m);
@@ -393,13 +419,27 @@ impl Work {
         new.columns_mut(at + m, n_old - at)
             .copy_from(&old.columns(at, n_old - at));
         self.rows = new;
-        for (_, row) in &mut self.shadows {
+        for row in &mut self.pending {
             row.splice(at..at, std::iter::repeat_n(0.0, m));
         }
+    }
+
+    /// Add `m` zero columns for block `b` after the open blocks.
+    fn open_block(&mut self, b: usize, m: usize) {
+        self.compress();
+        self.insert_cols(self.s0(), m);
         self.open.push((b, m));
     }
 
-    /// `col(dst) += factor * col(src)` over all rows (and the shadows).
+    /// Add the wander of observation `o` as the first unknown. The array
+    /// stays triangular once a row with an entry there is folded in (every
+    /// row then moves down by one).
+    fn open_wander(&mut self, o: usize) {
+        self.insert_cols(0, 1);
+        self.wander.insert(0, o);
+    }
+
+    /// `col(dst) += factor * col(src)` over all rows.
     fn axpy_col(&mut self, dst: usize, src: usize, factor: f64) {
         if factor == 0.0 {
             return;
@@ -408,39 +448,58 @@ impl Work {
             let v = self.rows[(i, src)];
             self.rows[(i, dst)] += factor * v;
         }
-        for (_, row) in &mut self.shadows {
-            row[dst] += factor * row[src];
-        }
     }
 
-    /// Whether the first open block can be eliminated: finished (`s` has taken
-    /// it in), not the newest (the prior linking it to the next is in), and
-    /// no residual still to come depends on it through a shadow.
+    /// Whether the first open block can be eliminated: finished (`s` has
+    /// taken it in) and not the newest (the prior linking it to the next is in).
     fn first_done(&self, completed: usize) -> bool {
-        match self.open.first() {
-            Some(&(b, m)) if self.open.len() > 1 && b < completed => self
-                .shadows
-                .iter()
-                .all(|(_, row)| row[..m].iter().all(|&v| v == 0.0)),
-            _ => false,
+        matches!(self.open.first(), Some(&(b, _)) if self.open.len() > 1 && b < completed)
+    }
+
+    /// Eliminate the `m` columns from `start` (a few columns from the left):
+    /// moved first and the array re-triangularised (only its first
+    /// `start + m` rows change), their rows go to the backward pass.
+    /// The array must be compressed.
+    fn eliminate_cols(&mut self, start: usize, m: usize) -> DMatrix<f64> {
+        let n = self.rows.ncols() - 1;
+        if start > 0 {
+            let order: Vec<usize> = (start..start + m)
+                .chain(0..start)
+                .chain(start + m..=n)
+                .collect();
+            self.rows = self.rows.select_columns(&order);
+            let nr = self.rows.nrows();
+            triangularise(&mut self.rows, n, nr);
         }
+        let kept = self.rows.rows(0, m).into_owned();
+        self.rows = self.rows.view((m, m), (n - m, n - m + 1)).into_owned();
+        kept
     }
 
     /// Eliminate the first open block: its rows go to the backward pass.
     fn eliminate_first(&mut self) -> Op {
         self.compress();
+        let start = self.wander.len();
         let (block, m) = self.open.remove(0);
-        let n = self.rows.ncols() - 1;
-        let kept = self.rows.rows(0, m).into_owned();
-        self.rows = self.rows.view((m, m), (n - m, n - m + 1)).into_owned();
-        for (_, row) in &mut self.shadows {
-            row.drain(..m);
-        }
+        let rows = self.eliminate_cols(start, m);
         Op::Eliminate {
-            block,
-            rows: kept,
-            rest: self.open.iter().map(|&(b, _)| b).collect(),
+            what: Unknown::Block(block),
+            rows,
+            rest: self.front(),
         }
+    }
+
+    /// Eliminate the wander of observation `o` once nothing ahead depends on it.
+    fn eliminate_wander(&mut self, o: usize) -> Option<Op> {
+        let at = self.wander_col(o)?;
+        self.compress();
+        self.wander.remove(at);
+        let rows = self.eliminate_cols(at, 1);
+        Some(Op::Eliminate {
+            what: Unknown::Wander(o),
+            rows,
+            rest: self.front(),
+        })
     }
 }
 
@@ -458,20 +517,27 @@ fn triangularise(a: &mut DMatrix<f64>, n: usize, tri: usize) {
     for j in 0..n.min(nr) {
         let (head, tail) = data.split_at_mut((j + 1) * nr);
         let col = &head[j * nr..];
-        // Rows the reflection touches: j and `from..nr`.
+        // Rows the reflection touches: j and `from..nr` ...
         let from = if j + 1 < tri && col[j + 1..tri].iter().all(|&x| x == 0.0) {
             tri
         } else {
             j + 1
         };
-        let norm = (col[j] * col[j] + dot(&col[from..], &col[from..])).sqrt();
+        // ... up to the last one that is not zero (a few rows when columns
+        // near the left were moved first).
+        let to = from
+            + col[from..]
+                .iter()
+                .rposition(|&x| x != 0.0)
+                .map_or(0, |p| p + 1);
+        let norm = (col[j] * col[j] + dot(&col[from..to], &col[from..to])).sqrt();
         if norm == 0.0 {
             continue;
         }
         let alpha = if col[j] > 0.0 { -norm } else { norm };
         let vj = col[j] - alpha;
-        v[from..].copy_from_slice(&col[from..]);
-        let vv = vj * vj + dot(&v[from..], &v[from..]);
+        v[from..to].copy_from_slice(&col[from..to]);
+        let vv = vj * vj + dot(&v[from..to], &v[from..to]);
         if vv == 0.0 {
             continue;
         }
@@ -481,13 +547,13 @@ fn triangularise(a: &mut DMatrix<f64>, n: usize, tri: usize) {
         col[j + 1..].fill(0.0);
         for k in j + 1..nc {
             let c = &mut tail[(k - j - 1) * nr..(k - j) * nr];
-            let d = vj * c[j] + dot(&v[from..], &c[from..]);
+            let d = vj * c[j] + dot(&v[from..to], &c[from..to]);
             if d == 0.0 {
                 continue;
             }
             let f = d * two_over_vv;
             c[j] -= f * vj;
-            for (ci, vi) in c[from..].iter_mut().zip(&v[from..]) {
+            for (ci, vi) in c[from..to].iter_mut().zip(&v[from..to]) {
                 *ci -= f * vi;
             }
         }
@@ -538,13 +604,22 @@ impl ChainSystem {
                 block_of[pos[i]] = b;
             }
         }
-        // diag(J^T J). A residual row is `slope_o dx_o + back_o dx_prev`; for a
-        // block complete before both observations that is `htilde_o . y_c`
-        // with `htilde_o = slope_o h_o + back_o h_prev` (suffix moments below);
-        // the rows inside a block, or straddling its end, are explicit.
+        // diag(J^T J). A residual row is `slope_o dx_o + back_o dz_prev(o)`
+        // with the filtered wander `dz_o = alpha_o dz_prev + kappa_o dx_o` (see
+        // `noise`). A global's column is its rows combined. A block's
+        // parameter (its `y`) moves the observations inside the block
+        // explicitly and those after it by `dx_o = h_o . y`; there
+        // `dz_o = hz_o . y + D_o`, with `hz` the filtered `h` and
+        // `D_o = alpha_o D_prev` what the chain remembers of the block's own
+        // rows, so `J_o = htilde_o . y + back_o Pi_o D_J` with
+        // `htilde_o = slope_o h_o + back_o hz_prev`, `J` the chain's last
+        // observation up to the block's end and `Pi_o` the alphas since.
+        // Summed over the rows after the block that is
+        // `y^T M y + sum_J (2 D_J Q_J . y + D_J^2 R_J)`: suffix moments `M` of
+        // `htilde`, and `Q`, `R` run backwards along each chain.
         let mut diag = vec![0.0; nf];
         let no = lin.r.len();
-        let prev_of = |o: usize| lin.prev[o].filter(|_| lin.slope[o].1 != 0.0);
+        let links = &lin.links;
         for (g, &i) in lin.globals.iter().enumerate() {
             diag[pos[i]] = lin
                 .combine(lin.jg.column(g).as_slice())
@@ -552,57 +627,83 @@ impl ChainSystem {
                 .map(|v| v * v)
                 .sum();
         }
+        let mut hz = vec![V9::zeros(); no];
+        let mut htilde = vec![V9::zeros(); no];
+        let mut next_in_chain = vec![usize::MAX; no];
         for o in 0..no {
             let (m, n) = lin.slope[o];
-            let row = lin.rows[o];
-            let (prev, prev_row) = match prev_of(o) {
-                Some(j) => (Some(j), lin.rows[j]),
-                None => (None, row),
-            };
-            // Blocks that end at or after the earlier observation and start by this one.
-            let from = lin.blocks.partition_point(|b| b.last < prev_row);
-            for b in from..lin.blocks.len() {
-                let block = &lin.blocks[b];
-                if block.first > row {
-                    break;
-                }
-                for (x, &i) in block.params.iter().enumerate() {
-                    let own = if row <= block.last {
-                        if lin.jb[o].0 == b as u32 {
-                            m * lin.jb[o].1[x]
-                        } else {
-                            0.0
-                        }
-                    } else {
-                        m * lin.h[o].dot(&lin.y[b][x])
-                    };
-                    let earlier = match prev {
-                        Some(j) if lin.jb[j].0 == b as u32 => n * lin.jb[j].1[x],
-                        _ => 0.0,
-                    };
-                    diag[pos[i]] += (own + earlier).powi(2);
+            let l = links[o];
+            let prev = l.prev.map_or(V9::zeros(), |j| hz[j]);
+            if let Some(j) = l.prev {
+                next_in_chain[j] = o;
+            }
+            hz[o] = prev * l.alpha + lin.h[o] * l.kappa;
+            htilde[o] = lin.h[o] * m + prev * n;
+        }
+        let mut q = vec![V9::zeros(); no];
+        let mut r2 = vec![0.0; no];
+        for j in (0..no).rev() {
+            let s = next_in_chain[j];
+            if s != usize::MAX {
+                let (n, a) = (lin.slope[s].1, links[s].alpha);
+                q[j] = htilde[s] * n + q[s] * a;
+                r2[j] = n * n + a * a * r2[s];
+            }
+        }
+        // Per block, the chains' last observations up to its end that a later one is linked to.
+        let mut straddling: Vec<Vec<usize>> = vec![Vec::new(); lin.blocks.len()];
+        for (s, l) in links.iter().enumerate() {
+            if let Some(j) = l.prev {
+                let from = lin.blocks.partition_point(|b| b.last < lin.rows[j]);
+                for (b, block) in lin.blocks.iter().enumerate().skip(from) {
+                    if block.last >= lin.rows[s] {
+                        break;
+                    }
+                    straddling[b].push(j);
                 }
             }
         }
-        let htilde: Vec<V9> = (0..no)
-            .map(|o| {
+        for (b, block) in lin.blocks.iter().enumerate() {
+            let lo = lin.rows.partition_point(|&r| r < block.first);
+            let hi = lin.rows.partition_point(|&r| r <= block.last);
+            // dz of the block's parameters at its own observations.
+            let mut z = vec![[0.0; 3]; hi - lo];
+            for o in lo..hi {
                 let (m, n) = lin.slope[o];
-                lin.h[o] * m + prev_of(o).map_or(V9::zeros(), |j| lin.h[j] * n)
-            })
-            .collect();
-        let key = |o: usize| prev_of(o).map_or(lin.rows[o], |j| lin.rows[j]);
-        let mut by_key: Vec<usize> = (0..no).collect();
-        by_key.sort_by_key(|&o| std::cmp::Reverse(key(o)));
-        let mut next = 0;
+                let l = links[o];
+                let zp = match l.prev {
+                    Some(j) if j >= lo => z[j - lo],
+                    _ => [0.0; 3],
+                };
+                let dx = if lin.jb[o].0 == b as u32 {
+                    lin.jb[o].1
+                } else {
+                    [0.0; 3]
+                };
+                for (x, &i) in block.params.iter().enumerate() {
+                    diag[pos[i]] += (m * dx[x] + n * zp[x]).powi(2);
+                    z[o - lo][x] = l.alpha * zp[x] + l.kappa * dx[x];
+                }
+            }
+            for &j in &straddling[b] {
+                for (x, &i) in block.params.iter().enumerate() {
+                    let y = &lin.y[b][x];
+                    let zj = if j >= lo { z[j - lo][x] } else { 0.0 };
+                    let d = zj - hz[j].dot(y);
+                    diag[pos[i]] += 2.0 * d * q[j].dot(y) + d * d * r2[j];
+                }
+            }
+        }
+        let mut next = no;
         let mut moments = nalgebra::SMatrix::<f64, 9, 9>::zeros();
         for (b, block) in lin.blocks.iter().enumerate().rev() {
             if block.last == usize::MAX {
                 continue;
             }
-            while next < no && key(by_key[next]) > block.last {
-                let hv = htilde[by_key[next]];
+            while next > 0 && lin.rows[next - 1] > block.last {
+                let hv = htilde[next - 1];
                 moments += hv * hv.transpose();
-                next += 1;
+                next -= 1;
             }
             for (x, &i) in block.params.iter().enumerate() {
                 diag[pos[i]] += lin.y[b][x].dot(&(moments * lin.y[b][x]));
@@ -712,8 +813,16 @@ impl ChainSystem {
             labels: Vec::with_capacity(n),
             l: rinv,
         };
-        for &(b, m) in &f.open {
-            walk.labels.extend((0..m).map(|x| Var::Block(b, x)));
+        let vars = |u: &Unknown| -> Vec<Var> {
+            match *u {
+                Unknown::Block(b) => (0..blocks[b].params.len())
+                    .map(|x| Var::Block(b, x))
+                    .collect(),
+                Unknown::Wander(o) => vec![Var::Z(o)],
+            }
+        };
+        for u in &f.front {
+            walk.labels.extend(vars(u));
         }
         walk.labels.extend((0..6).map(Var::S));
         walk.labels.extend((0..lin.globals.len()).map(Var::G));
@@ -723,7 +832,7 @@ impl ChainSystem {
                 let i = match *l {
                     Var::Block(b, x) => blocks[b].params[x],
                     Var::G(g) => lin.globals[g],
-                    Var::S(_) => continue,
+                    Var::S(_) | Var::Z(_) => continue,
                 };
                 let c = self.pos[i];
                 if var[c].is_nan() {
@@ -770,21 +879,18 @@ impl ChainSystem {
                     }
                     walk.transform(&terms)?;
                 }
-                Op::Eliminate { block, rows, rest } => {
-                    let m = blocks[*block].params.len();
-                    let mut rest_vars: Vec<Var> = Vec::new();
-                    for &b in rest {
-                        rest_vars.extend((0..blocks[b].params.len()).map(|x| Var::Block(b, x)));
-                    }
+                Op::Eliminate { what, rows, rest } => {
+                    let mut rest_vars: Vec<Var> = rest.iter().flat_map(vars).collect();
                     rest_vars.extend((0..6).map(Var::S));
                     rest_vars.extend((0..lin.globals.len()).map(Var::G));
-                    walk.eliminated(*block, m, rows, &rest_vars)?;
+                    walk.eliminated(&vars(what), rows, &rest_vars)?;
                     keep_var(&walk, &mut var);
                 }
             }
             // Blocks opened after change `i` are not unknowns before it.
             walk.retain(|l| match l {
                 Var::Block(b, _) => f.open_at.get(*b).is_some_and(|&at| at <= i),
+                Var::Z(o) => f.wander_at.get(*o).is_some_and(|&at| at <= i),
                 _ => true,
             });
             store(&walk, i, origin, &mut mark);
@@ -822,7 +928,7 @@ impl ChainSystem {
                         idx.push(k);
                     }
                 }
-                Var::S(_) | Var::G(_) => {}
+                Var::S(_) | Var::G(_) | Var::Z(_) => {}
             }
         }
         for k in 0..6 {
@@ -858,23 +964,24 @@ impl ChainSystem {
             .collect();
         let global_col: Vec<usize> = lin.globals.iter().map(|&i| self.pos[i]).collect();
         let mut work = Work {
+            wander: Vec::new(),
             open: Vec::new(),
             ng,
             rows: DMatrix::zeros(0, 7 + ng),
             pending: Vec::new(),
             origin: Vector3::zeros(),
-            shadows: Vec::new(),
         };
-        // Observations a later whitened residual depends on.
-        let mut needed = vec![false; lin.r.len()];
-        for (o, p) in lin.prev.iter().enumerate() {
-            if let Some(j) = *p
-                && lin.slope[o].1 != 0.0
-            {
-                needed[j] = true;
+        // The observation linked to each (`usize::MAX`: none).
+        let mut next_in_chain = vec![usize::MAX; lin.r.len()];
+        for (o, l) in lin.links.iter().enumerate() {
+            if let Some(j) = l.prev {
+                next_in_chain[j] = o;
             }
         }
         let mut ops: Vec<Op> = Vec::new();
+        // Heavy rows defining a wander (each adds exactly its weight squared to the determinant).
+        let mut constraint_log_det = 0.0;
+        let mut wander_at = vec![usize::MAX; lin.r.len()];
         // s = 0 exactly, and the globals' damping and priors.
         for k in 0..6 {
             let mut row = vec![0.0; 7 + ng];
@@ -1012,26 +1119,45 @@ impl ChainSystem {
             for (g, &c) in global_col.iter().enumerate() {
                 r[g0 + g] = lin.jg[(o, g)] / scale[c];
             }
-            // The residual's row: slope_o dx_o + back_o dx_prev.
+            // The residual's row: slope_o dx_o + back_o z_prev, with the
+            // previous observation's wander an unknown of its own.
             let (m, back) = lin.slope[o];
-            let earlier = lin.prev[o].filter(|_| back != 0.0).and_then(|j| {
-                let at = work.shadows.iter().position(|(k, _)| *k == j)?;
-                Some(work.shadows.swap_remove(at).1)
-            });
-            if needed[o] {
-                work.shadows.push((o, r[..n].to_vec()));
-            }
+            let link = lin.links[o];
+            let dx: Vec<f64> = r[..n].to_vec();
             for v in &mut r {
                 *v *= m;
             }
-            if let Some(dx) = earlier {
-                for (v, d) in r.iter_mut().zip(dx) {
-                    *v += back * d;
-                }
+            if let Some(c) = link.prev.and_then(|j| work.wander_col(j)) {
+                r[c] += back;
             }
             r[n] = -lin.r[o];
             work.pending.push(r);
-            if work.pending.len() >= 2 * n {
+            // This observation's wander, for the next one linked to it:
+            // z_o = alpha_o z_prev + kappa_o dx_o, held by a heavy row; then
+            // the previous wander, which nothing ahead depends on any more, goes.
+            if let Some(&next) = next_in_chain.get(o).filter(|&&k| k != usize::MAX) {
+                let prev_col = link.prev.and_then(|j| work.wander_col(j));
+                wander_at[o] = ops.len();
+                work.open_wander(o);
+                // Heavy against the row that will read it: a constraint, not a prior.
+                let w = WANDER_PIN * (1.0 + lin.slope[next].1.abs());
+                let mut c = vec![0.0; n + 2];
+                c[0] = w;
+                for (k, d) in dx.iter().enumerate() {
+                    c[k + 1] = -w * link.kappa * d;
+                }
+                if let Some(p) = prev_col {
+                    c[p + 1] -= w * link.alpha;
+                }
+                work.pending.push(c);
+                constraint_log_det += 2.0 * w.ln();
+            }
+            if let Some(j) = link.prev
+                && let Some(op) = work.eliminate_wander(j)
+            {
+                ops.push(op);
+            }
+            if work.pending.len() >= 2 * work.n() {
                 work.compress();
             }
         }
@@ -1045,7 +1171,8 @@ impl ChainSystem {
         }
         work.compress();
 
-        let mut log_det = self.diag.iter().map(|d| d.ln()).sum::<f64>() - 12.0 * PIN.ln();
+        let mut log_det =
+            self.diag.iter().map(|d| d.ln()).sum::<f64>() - 12.0 * PIN.ln() - constraint_log_det;
         for op in &ops {
             if let Op::Eliminate { rows, .. } = op {
                 for i in 0..rows.nrows() {
@@ -1058,15 +1185,24 @@ impl ChainSystem {
         }
 
         let forward = Forward {
+            front: work.front(),
             rows: work.rows,
-            open: work.open,
             ops,
             scale,
             stages: cursor.stages,
             open_at: cursor.open_at,
+            wander_at,
             origin: work.origin,
         };
         Some(Solved { log_det, forward })
+    }
+
+    /// Columns of an unknown of the array.
+    fn size(&self, u: &Unknown) -> usize {
+        match *u {
+            Unknown::Block(b) => self.lin.blocks[b].params.len(),
+            Unknown::Wander(_) => 1,
+        }
     }
 
     /// The backward pass: back-substitution through the final triangle and
@@ -1081,9 +1217,14 @@ impl ChainSystem {
         let n = f.rows.nrows();
         let last = solve_upper(f.rows.view((0, 0), (n, n)), &rhs(&f.rows, n))?;
         let mut xb: Vec<Vec<f64>> = vec![Vec::new(); nb];
+        let mut xz: Vec<f64> = vec![0.0; lin.r.len()];
         let mut c = 0;
-        for &(b, m) in &f.open {
-            xb[b] = last[c..c + m].to_vec();
+        for u in &f.front {
+            let m = self.size(u);
+            match *u {
+                Unknown::Block(b) => xb[b] = last[c..c + m].to_vec(),
+                Unknown::Wander(o) => xz[o] = last[c],
+            }
             c += m;
         }
         let mut s = [0.0; 6];
@@ -1106,18 +1247,25 @@ impl ChainSystem {
                         }
                     }
                 }
-                Op::Eliminate { block, rows, rest } => {
-                    let m = blocks[*block].params.len();
+                Op::Eliminate { what, rows, rest } => {
+                    let m = self.size(what);
                     let mut known: Vec<f64> = Vec::new();
-                    for &b in rest {
-                        known.extend_from_slice(&xb[b]);
+                    for u in rest {
+                        match *u {
+                            Unknown::Block(b) => known.extend_from_slice(&xb[b]),
+                            Unknown::Wander(o) => known.push(xz[o]),
+                        }
                     }
                     known.extend_from_slice(&s);
                     known.extend_from_slice(&xg);
                     let rest_cols = rows.ncols() - 1 - m;
                     let rhs =
                         rhs(rows, m) - rows.view((0, m), (m, rest_cols)) * DVector::from_vec(known);
-                    xb[*block] = solve_upper(rows.view((0, 0), (m, m)), &rhs)?;
+                    let x = solve_upper(rows.view((0, 0), (m, m)), &rhs)?;
+                    match *what {
+                        Unknown::Block(b) => xb[b] = x,
+                        Unknown::Wander(o) => xz[o] = x[0],
+                    }
                 }
             }
         }

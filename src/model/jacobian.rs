@@ -19,7 +19,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 use super::Model;
-use super::observe::Whitener;
+use super::observe::{WanderDerivative, Whitener};
 use super::rotation::left_jacobian;
 
 /// Weighted residuals, their Jacobian with respect to the free parameters, and the cost.
@@ -241,17 +241,24 @@ impl Model {
                 k += 1;
             }
         });
-        // d r_k = slope_k d x_k + back_k d x_prev, last row first so that the
-        // previous row is still d x when it is read.
-        for k in (0..obs.len()).rev() {
-            let (slope, back) = slopes[k];
-            match plan.links[k].prev {
-                Some(j) if back != 0.0 => {
-                    for c in 0..columns.len() {
-                        jac[(k, c)] = slope * jac[(k, c)] + back * jac[(j, c)];
-                    }
+        // d r_k = slope_k d x_k + back_k d z_prev, in order, carrying the
+        // filtered wander's rows d z_k = alpha_k d z_prev + kappa_k d x_k.
+        let mut wander = WanderDerivative::<DVector<f64>>::new(&plan.links);
+        for (k, &(slope, back)) in slopes.iter().enumerate() {
+            let link = plan.links[k];
+            let dz_prev = wander.take_prev(&plan.links, k);
+            wander.record(k, || {
+                let dx = jac.row(k).transpose() * link.kappa;
+                match &dz_prev {
+                    Some(dz) => dx + dz * link.alpha,
+                    None => dx,
                 }
-                _ => jac.row_mut(k).scale_mut(slope),
+            });
+            jac.row_mut(k).scale_mut(slope);
+            if let Some(dz) = dz_prev {
+                for c in 0..columns.len() {
+                    jac[(k, c)] += back * dz[c];
+                }
             }
         }
 

@@ -68,7 +68,8 @@ pub struct ModelSpec {
     pub segment_s: f64,
     /// Random-walk density of the segment-bias prior (deg/s/sqrt(s)); `None` = the paper (no prior).
     pub bias_walk_dps_sqrt_s: Option<f64>,
-    /// GPS horizontal noise (m).
+    /// GPS horizontal noise (m): of every fix when fixes are independent,
+    /// of the wander (the correlated part) with a correlation time.
     pub sigma_horizontal_m: f64,
     /// GPS altitude noise (m).
     pub sigma_vertical_m: f64,
@@ -78,6 +79,11 @@ pub struct ModelSpec {
     /// [`noise`]); `None` = independent fixes (the paper).
     #[serde(default)]
     pub gps_tau_s: Option<f64>,
+    /// With a correlation time: the jitter of each fix on top of the wander
+    /// (m, horizontal; the vertical one keeps the ratio of the vertical sigma
+    /// to the horizontal; scaled by the fix's logged accuracy). See [`noise`].
+    #[serde(default)]
+    pub gps_white_m: f64,
     pub increment: Increment,
 }
 
@@ -91,6 +97,7 @@ impl Default for ModelSpec {
             sigma_vertical_m: 8.0,
             sigma_baro_m: 1.0,
             gps_tau_s: None,
+            gps_white_m: 0.0,
             increment: Increment::Exact,
         }
     }
@@ -133,13 +140,18 @@ fn fix_sigma(sigma: f64, acc: Option<f64>, median: Option<f64>) -> f64 {
 }
 
 /// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
-/// position at `row`, compared with `target`, weighted by `w = 1/sigma`.
+/// position at `row`, compared with `target`, with an error of a wander
+/// shared with neighbouring fixes and a jitter of its own (see [`noise`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Observation {
     pub row: usize,
     pub axis: usize,
     pub target: f64,
-    pub w: f64,
+    /// Standard deviation of the observation's own error (m): all of it
+    /// without a correlation time, the jitter on top of the wander with one.
+    pub sd_white: f64,
+    /// Stationary standard deviation of the wander (m; 0: none).
+    pub sd_gm: f64,
     /// A barometric row (compared with the barometer, not GPS).
     pub baro: bool,
     /// Time of the fix (log time, s).
@@ -213,6 +225,12 @@ impl Model {
                 noise::MAX_TAU_S
             )));
         }
+        if !(spec.gps_white_m.is_finite() && spec.gps_white_m >= 0.0) {
+            return Err(ModelError::Setting(format!(
+                "GPS jitter must be zero or a positive number of metres, got {}",
+                spec.gps_white_m
+            )));
+        }
         let ids = effects::expand(&spec.effects, &signals)?;
         let effects: Vec<Box<dyn Effect>> = ids
             .iter()
@@ -238,24 +256,39 @@ impl Model {
         let mut observations = Vec::new();
         let h_scale = accuracy_scale(signals.fixes.iter().map(|f| f.hacc));
         let v_scale = accuracy_scale(signals.fixes.iter().map(|f| f.vacc));
+        // (wander, jitter) of a GPS axis of sigma `sigma`: the jitter alone,
+        // scaled per fix, for independent fixes; with a correlation time the
+        // wander is the setting and the jitter keeps the horizontal ratio.
+        let correlated = spec.gps_tau_s.is_some_and(|t| t > 0.0);
+        let split = |sigma: f64, acc: Option<f64>, scale: Option<f64>| {
+            if correlated {
+                let white = sigma * spec.gps_white_m / spec.sigma_horizontal_m;
+                (sigma, fix_sigma(white, acc, scale))
+            } else {
+                (0.0, fix_sigma(sigma, acc, scale))
+            }
+        };
         for fix in &signals.fixes {
-            let wh = 1.0 / fix_sigma(spec.sigma_horizontal_m, fix.hacc, h_scale);
+            let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, fix.hacc, h_scale);
             for axis in 0..2 {
                 observations.push(Observation {
                     row: fix.row,
                     axis,
                     target: fix.en[axis],
-                    w: wh,
+                    sd_white,
+                    sd_gm,
                     baro: false,
                     t: fix.t,
                 });
             }
             if let Some(up) = fix.up {
+                let (sd_gm, sd_white) = split(spec.sigma_vertical_m, fix.vacc, v_scale);
                 observations.push(Observation {
                     row: fix.row,
                     axis: 2,
                     target: up,
-                    w: 1.0 / fix_sigma(spec.sigma_vertical_m, fix.vacc, v_scale),
+                    sd_white,
+                    sd_gm,
                     baro: false,
                     t: fix.t,
                 });
@@ -265,7 +298,8 @@ impl Model {
                     row: fix.row,
                     axis: 2,
                     target: b,
-                    w: 1.0 / spec.sigma_baro_m,
+                    sd_white: spec.sigma_baro_m,
+                    sd_gm: 0.0,
                     baro: true,
                     t: fix.t,
                 });

@@ -1,28 +1,45 @@
-//! The GPS error model: first-order Gauss-Markov errors, correlated from fix
-//! to fix, whitened so that the least-squares cost stays a plain sum of
-//! squares.
+//! The GPS error model: a first-order Gauss-Markov error, correlated from
+//! fix to fix, plus a white error of its own per fix, whitened by a Kalman
+//! filter so that the least-squares cost stays a plain sum of squares.
 //!
 //! Real GPS errors wander (atmosphere, multipath, the receiver's own filter):
-//! the error of a fix is mostly the error of the fix before it. With
-//! correlation time `tau` and `a_k = exp(-dt_k / tau)` between consecutive
-//! fixes, the error `n_k = a_k n_{k-1} + sqrt(1 - a_k^2) sigma_k v_k` with
-//! white `v_k`, so
+//! the error of a fix is mostly the error of the fix before it. On top of that
+//! wander each fix has a jitter of its own, and a receiver's per-fix accuracy
+//! says how large that jitter is. Per axis, in metres, the misfit of fix `k`
+//! is
 //!
 //! ```text
-//! e_k  = (x_k - y_k) / sigma_k                      the weighted residual of fix k (one axis)
-//! e'_k = (e_k - a_k e_{k-1}) / sqrt(1 - a_k^2)      its innovation: independent, unit variance
+//! m_k = x_k - y_k = g_k + v_k
+//! g_k = a_k g_{k-1} + sqrt(1 - a_k^2) sigma_g n_k,   a_k = exp(-dt_k / tau)   the wander (stationary sd sigma_g)
+//! v_k ~ N(0, R_k),  R_k = (sigma_w acc_k / median(acc))^2                       the jitter
+//! ```
+//!
+//! Its whitening is the Kalman filter of `g` (a scalar per axis, independent
+//! of the path's parameters, so its gains are fixed numbers): with `z_k` the
+//! filtered wander and `P_k` its variance,
+//!
+//! ```text
+//! S_k  = a_k^2 P_{k-1} + (1 - a_k^2) sigma_g^2 + R_k      innovation variance
+//! e'_k = (m_k - a_k z_{k-1}) / sqrt(S_k) = u_k m_k + v_k z_{k-1}   the innovation: independent, unit variance
+//! K_k  = (S_k - R_k) / S_k,  z_k = (1 - K_k) a_k z_{k-1} + K_k m_k = alpha_k z_{k-1} + kappa_k m_k
+//! P_k  = (1 - K_k)(S_k - R_k)
 //! ```
 //!
 //! is what the cost sums (its square, through the robust loss when there is
-//! one). The first fix of a chain, and the first after an outage longer than
-//! [`OUTAGE_S`] (the receiver re-acquires and its error starts afresh),
-//! has `a = 0`: `e'_k = e_k`. Without a correlation time every `a_k = 0`
-//! and this is the paper's independent least squares.
+//! one), and `sum_k ln S_k` is the log-determinant of the errors' covariance.
+//! The first fix of a chain, and the first after an outage longer than
+//! [`OUTAGE_S`] (the receiver re-acquires and its error starts afresh), has
+//! `a = 0`: `S = sigma_g^2 + R`. Without a jitter (`R = 0`) the filter is
+//! exact after one fix and `e'_k = (m_k - a_k m_{k-1}) / (sigma_g sqrt(1 - a_k^2))`;
+//! without a correlation time every fix is independent with `S_k = sigma_k^2`,
+//! the paper's least squares with per-fix weights.
 //!
-//! A whitened residual depends on two fixes, so its derivative has two parts:
-//! `d r_k = psi'(e'_k) c_k (w_k d x_k - a_k w_{k-1} d x_{k-1})`,
-//! `c_k = 1 / sqrt(1 - a_k^2)`. The gradient, the Jacobian and the chain
-//! solver each take the two coefficients from [`Link`].
+//! A whitened residual depends on its own misfit and on the filtered wander,
+//! itself a fixed linear filter of the earlier misfits, so its derivative is
+//! `d r_k = psi'(e'_k) (u_k d m_k + v_k d z_{k-1})` with
+//! `d z_k = alpha_k d z_{k-1} + kappa_k d m_k`. The gradient (run backwards),
+//! the Jacobian and the chain solver (run forwards) each take the four
+//! coefficients from [`Link`].
 
 use super::{Model, Observation};
 
@@ -33,56 +50,76 @@ pub const OUTAGE_S: f64 = 10.0;
 /// digits and the innovations meaningless (a constant offset is an effect, not noise).
 pub const MAX_TAU_S: f64 = 3600.0;
 
-/// How observation `k` is linked to the previous fix's observation of the same axis.
+/// How observation `k` is whitened: its innovation `e'_k = u m_k + v z_prev`
+/// and the filtered wander `z_k = alpha z_prev + kappa m_k` it passes on.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Link {
     /// Index of the previous observation of the same axis (`None`: a chain starts here).
     pub prev: Option<usize>,
-    /// `a_k = exp(-dt_k / tau)`.
-    pub a: f64,
-    /// `c_k = 1 / sqrt(1 - a_k^2)`.
-    pub c: f64,
+    /// `u_k = 1 / sqrt(S_k)`.
+    pub u: f64,
+    /// `v_k = -a_k / sqrt(S_k)` (0 without `prev`).
+    pub v: f64,
+    /// `alpha_k = (1 - K_k) a_k` (0 without `prev`).
+    pub alpha: f64,
+    /// `kappa_k = K_k` (0 for an observation nothing is linked to).
+    pub kappa: f64,
 }
 
 impl Link {
-    pub const NONE: Link = Link {
-        prev: None,
-        a: 0.0,
-        c: 1.0,
-    };
+    /// An independent observation of standard deviation `sd`.
+    pub fn independent(sd: f64) -> Self {
+        Link {
+            prev: None,
+            u: 1.0 / sd,
+            v: 0.0,
+            alpha: 0.0,
+            kappa: 0.0,
+        }
+    }
 }
 
-/// Link every GPS observation to the previous fix's observation of the same
-/// axis (barometric rows are never linked: the barometer's noise is its own).
-/// `tau = None` or `0` links nothing.
+/// The whitening of every observation: GPS observations of one axis are
+/// linked to the previous fix's when the model has a correlation time and a
+/// wander (`sd_gm > 0`); barometric rows never are (the barometer's noise is
+/// its own). `tau = None` or `0` links nothing.
 pub(crate) fn links(obs: &[Observation], tau: Option<f64>) -> Vec<Link> {
-    let mut out = vec![Link::NONE; obs.len()];
-    let Some(tau) = tau.filter(|t| t.is_finite() && *t > 0.0) else {
-        return out;
-    };
-    let mut last: [Option<usize>; 3] = [None; 3];
-    for (k, o) in obs.iter().enumerate() {
-        if o.baro {
-            continue;
-        }
-        if let Some(j) = last[o.axis] {
-            let dt = o.t - obs[j].t;
-            if dt > 0.0 && dt <= OUTAGE_S {
-                let a = (-dt / tau).exp();
-                // 1 - a^2 without cancellation for dt << tau.
-                let one_minus = -(-2.0 * dt / tau).exp_m1();
-                if one_minus > 0.0 {
-                    out[k] = Link {
-                        prev: Some(j),
-                        a,
-                        c: 1.0 / one_minus.sqrt(),
-                    };
-                }
+    let tau = tau.filter(|t| t.is_finite() && *t > 0.0);
+    // Per axis: the last linked observation and its filtered variance P.
+    let mut last: [Option<(usize, f64)>; 3] = [None; 3];
+    obs.iter()
+        .enumerate()
+        .map(|(k, o)| {
+            let (Some(tau), false, true) = (tau, o.baro, o.sd_gm > 0.0) else {
+                return Link::independent(o.sd_white);
+            };
+            let q = o.sd_gm * o.sd_gm;
+            let r = o.sd_white * o.sd_white;
+            let linked = last[o.axis].and_then(|(j, p)| {
+                let dt = o.t - obs[j].t;
+                (dt > 0.0 && dt <= OUTAGE_S).then(|| {
+                    // 1 - a^2 without cancellation for dt << tau.
+                    let one_minus = -(-2.0 * dt / tau).exp_m1();
+                    (j, (-dt / tau).exp(), p, one_minus)
+                })
+            });
+            let (prev, a, predicted) = match linked {
+                Some((j, a, p, one_minus)) => (Some(j), a, a * a * p + one_minus * q),
+                None => (None, 0.0, q),
+            };
+            let s = predicted + r;
+            let gain = predicted / s;
+            last[o.axis] = Some((k, predicted * r / s));
+            let u = 1.0 / s.sqrt();
+            Link {
+                prev,
+                u,
+                v: -a * u,
+                alpha: (1.0 - gain) * a,
+                kappa: gain,
             }
-        }
-        last[o.axis] = Some(k);
-    }
-    out
+        })
+        .collect()
 }
 
 /// A first guess of the GPS sigma per axis and the correlation time from
@@ -141,17 +178,12 @@ impl Model {
     }
 
     /// `ln det` of the covariance of everything the cost weighs: the
-    /// observations' (`prod sigma_k^2 (1 - a_k^2)`: a chain's covariance
-    /// determinant is its innovations') and the prior rows' with a free
+    /// observations' (`prod S_k`: a chain's covariance determinant is its
+    /// innovations') and the prior rows' with a free
     /// entry (`1 / w^2` per row). A marginal likelihood adds it to the cost.
     pub(crate) fn noise_log_det(&self, theta: &[f64], free: &[bool]) -> f64 {
         let plan = self.obs_plan(theta);
-        let obs: f64 = self
-            .observations
-            .iter()
-            .zip(&plan.links)
-            .map(|(o, l)| -2.0 * o.w.ln() - 2.0 * l.c.ln())
-            .sum();
+        let obs: f64 = plan.links.iter().map(|l| -2.0 * l.u.ln()).sum();
         let prior = self.prior_rows(theta);
         let mut weight = vec![0.0f64; prior.residuals.len()];
         for &(row, col, v) in &prior.entries {
@@ -172,14 +204,31 @@ mod tests {
     use super::*;
 
     fn obs(t: f64, axis: usize, baro: bool) -> Observation {
+        gm_obs(t, axis, baro, 1.0, 0.0)
+    }
+
+    fn gm_obs(t: f64, axis: usize, baro: bool, sd_gm: f64, sd_white: f64) -> Observation {
         Observation {
             row: 0,
             axis,
             target: 0.0,
-            w: 1.0,
+            sd_white,
+            sd_gm,
             baro,
             t,
         }
+    }
+
+    /// Innovations of misfits `m` as the whitener computes them.
+    fn innovations(l: &[Link], m: &[f64]) -> Vec<f64> {
+        let mut z = vec![0.0; m.len()];
+        (0..m.len())
+            .map(|k| {
+                let zp = l[k].prev.map_or(0.0, |j| z[j]);
+                z[k] = l[k].alpha * zp + l[k].kappa * m[k];
+                l[k].u * m[k] + l[k].v * zp
+            })
+            .collect()
     }
 
     #[test]
@@ -212,10 +261,10 @@ mod tests {
         let o = vec![
             obs(0.0, 0, false),
             obs(0.0, 1, false),
-            obs(0.0, 2, true),
+            gm_obs(0.0, 2, true, 0.0, 0.5),
             obs(1.0, 0, false),
             obs(1.0, 1, false),
-            obs(1.0, 2, true),
+            gm_obs(1.0, 2, true, 0.0, 0.5),
             obs(30.0, 0, false),
             obs(31.0, 0, false),
         ];
@@ -223,43 +272,82 @@ mod tests {
         assert_eq!(l[0].prev, None);
         assert_eq!(l[3].prev, Some(0));
         assert_eq!(l[4].prev, Some(1));
-        assert_eq!(l[5], Link::NONE, "barometric rows are never linked");
+        assert_eq!(
+            l[5],
+            Link::independent(0.5),
+            "barometric rows are never linked"
+        );
         assert_eq!(l[6].prev, None, "29 s gap: a new chain");
         assert_eq!(l[7].prev, Some(6));
+        // Without a jitter: e' = (m_k - a m_{k-1}) / (sigma sqrt(1 - a^2)).
         let a = (-1.0f64 / 60.0).exp();
-        assert!((l[7].a - a).abs() < 1e-15);
-        assert!((l[7].c - 1.0 / (1.0 - a * a).sqrt()).abs() < 1e-9);
-        assert!(links(&o, None).iter().all(|l| *l == Link::NONE));
-        assert!(links(&o, Some(0.0)).iter().all(|l| *l == Link::NONE));
+        assert!((l[7].v / l[7].u + a).abs() < 1e-15);
+        assert!((l[7].u - 1.0 / (1.0 - a * a).sqrt()).abs() < 1e-9);
+        assert_eq!((l[7].alpha, l[7].kappa), (0.0, 1.0));
+        for tau in [None, Some(0.0)] {
+            assert!(
+                links(&o, tau)
+                    .iter()
+                    .all(|l| l.prev.is_none() && l.kappa == 0.0)
+            );
+        }
+    }
+
+    #[test]
+    fn the_filter_is_the_exact_whitening_of_wander_plus_jitter() {
+        // Two chains (an outage between them) of wander 1.5 m over 20 s plus a
+        // per-fix jitter: sum e'^2 = m^T Sigma^-1 m and sum ln S = ln det Sigma.
+        let tau = 20.0;
+        let mut o = Vec::new();
+        for k in 0..40 {
+            let t = k as f64 * 0.7 + if k >= 25 { 30.0 } else { 0.0 };
+            o.push(gm_obs(t, 0, false, 1.5, 0.2 + 0.1 * (k % 4) as f64));
+        }
+        let n = o.len();
+        let l = links(&o, Some(tau));
+        let sigma = nalgebra::DMatrix::from_fn(n, n, |i, j| {
+            let linked = (i < 25) == (j < 25);
+            let wander = if linked {
+                1.5f64.powi(2) * (-(o[i].t - o[j].t).abs() / tau).exp()
+            } else {
+                0.0
+            };
+            wander + if i == j { o[i].sd_white.powi(2) } else { 0.0 }
+        });
+        let m: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() * 2.0).collect();
+        let mv = nalgebra::DVector::from_column_slice(&m);
+        let chol = sigma.cholesky().unwrap();
+        let want = mv.dot(&chol.solve(&mv));
+        let got: f64 = innovations(&l, &m).iter().map(|e| e * e).sum();
+        assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
+        let log_det: f64 = l.iter().map(|l| -2.0 * l.u.ln()).sum();
+        let want = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+        assert!((log_det - want).abs() < 1e-9, "{log_det} vs {want}");
     }
 
     #[test]
     fn whitened_gauss_markov_errors_are_white_with_unit_variance() {
         // Simulate the process the whitening inverts; its innovations come back.
-        let tau = 40.0;
+        let (tau, sd_gm, sd_white) = (40.0, 1.5, 0.5);
         let mut rng = crate::simulation::rng::Rng::new(5);
         let n = 20_000;
         let mut e = Vec::with_capacity(n);
-        let mut x = rng.normal();
+        let mut x = sd_gm * rng.normal();
+        let a: f64 = (-1.0f64 / tau).exp();
         for _ in 0..n {
-            e.push(x);
-            let a: f64 = (-1.0f64 / tau).exp();
-            x = a * x + (1.0 - a * a).sqrt() * rng.normal();
+            e.push(x + sd_white * rng.normal());
+            x = a * x + (1.0 - a * a).sqrt() * sd_gm * rng.normal();
         }
-        let o: Vec<Observation> = (0..n).map(|i| obs(i as f64, 0, false)).collect();
-        let l = links(&o, Some(tau));
-        let w: Vec<f64> = (0..n)
-            .map(|k| match l[k].prev {
-                Some(j) => l[k].c * (e[k] - l[k].a * e[j]),
-                None => e[k],
-            })
+        let o: Vec<Observation> = (0..n)
+            .map(|i| gm_obs(i as f64, 0, false, sd_gm, sd_white))
             .collect();
+        let w = innovations(&links(&o, Some(tau)), &e);
         let var = w.iter().map(|v| v * v).sum::<f64>() / n as f64;
         let lag1 = w.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / n as f64;
         assert!((var - 1.0).abs() < 0.03, "variance {var}");
         assert!(lag1.abs() < 0.03, "lag-1 correlation {lag1}");
         // The raw errors are anything but white.
         let raw1 = e.windows(2).map(|p| p[0] * p[1]).sum::<f64>() / n as f64;
-        assert!(raw1 > 0.9, "raw lag-1 {raw1}");
+        assert!(raw1 > 0.8 * sd_gm * sd_gm, "raw lag-1 {raw1}");
     }
 }

@@ -20,6 +20,7 @@
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
 
 use super::Model;
+use super::noise::Link;
 use super::observe::Whitener;
 use crate::effects::PriorRows;
 
@@ -68,9 +69,10 @@ pub(crate) struct ChainLinearisation {
     pub jb: Vec<(u32, [f64; 3])>,
     /// Residuals of the observations (whitened, through the robust loss).
     pub r: DVector<f64>,
-    /// `(d r_o / d x_o, d r_o / d x_prev)` and the linked previous observation.
+    /// `(d r_o / d x_o, d r_o / d z_prev)`.
     pub slope: Vec<(f64, f64)>,
-    pub prev: Vec<Option<usize>>,
+    /// How each observation is linked to the one before it (GPS error correlation).
+    pub links: Vec<Link>,
     /// Prior rows (entries of free parameters only).
     pub prior: PriorRows,
     /// Cost of observations and priors.
@@ -274,7 +276,7 @@ impl Model {
             jb,
             r,
             slope,
-            prev: plan.links.iter().map(|l| l.prev).collect(),
+            links: plan.links,
             prior,
             cost: cost + prior_cost,
             horizon: self.horizon(),
@@ -295,7 +297,7 @@ impl Model {
             out.r[k] = v.r;
             out.slope[k] = (v.slope, v.back);
         }
-        out.prev = plan.links.iter().map(|l| l.prev).collect();
+        out.links = plan.links;
         let mut prior = self.prior_rows(theta);
         let prior_cost = prior.residuals.iter().map(|x| x * x).sum::<f64>();
         let free: std::collections::HashSet<usize> = lin.columns.iter().copied().collect();
@@ -316,18 +318,22 @@ impl Model {
 }
 
 impl ChainLinearisation {
-    /// Whether some residual row depends on two observations (whitened GPS errors).
+    /// Whether some residual row depends on more than its own observation (whitened GPS errors).
     pub fn is_coupled(&self) -> bool {
-        self.slope.iter().any(|&(_, back)| back != 0.0)
+        self.links.iter().any(|l| l.prev.is_some())
     }
 
     /// `J delta` of every residual row, from `d x delta` of the observations
-    /// (`dx[o]`): `slope_o dx_o + back_o dx_prev(o)`.
+    /// (`dx[o]`): `slope_o dx_o + back_o dz_prev(o)`.
     pub fn combine(&self, dx: &[f64]) -> Vec<f64> {
+        let mut dz = vec![0.0; dx.len()];
         (0..dx.len())
             .map(|o| {
                 let (m, n) = self.slope[o];
-                m * dx[o] + self.prev[o].map_or(0.0, |j| n * dx[j])
+                let l = self.links[o];
+                let prev = l.prev.map_or(0.0, |j| dz[j]);
+                dz[o] = l.alpha * prev + l.kappa * dx[o];
+                m * dx[o] + n * prev
             })
             .collect()
     }

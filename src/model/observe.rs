@@ -19,8 +19,9 @@
 //! row and `beta = 0`, which is the paper's objective (eq. 7).
 //!
 //! With a GPS correlation time (see [`super::noise`]) `psi` acts on the
-//! whitened `e'_k = c_k (e_k - a_k e_{k-1})` instead, and `r_k` has a second
-//! slope, on the previous fix's `x`: [`ObsValue::back`].
+//! innovation `e'_k = u_k (x_k - y_k) + v_k z_{k-1}` instead, and `r_k` has a
+//! second slope, on the filtered wander `z` of the fixes before it:
+//! [`ObsValue::back`].
 
 use nalgebra::Vector3;
 
@@ -54,7 +55,7 @@ pub(crate) struct ObsPlan {
 pub(crate) struct Misfit {
     /// `x_k - y_k` (m).
     pub metres: f64,
-    /// `e'_k`, the whitened weighted misfit (unit variance under the noise model).
+    /// `e'_k`, the whitened misfit (unit variance under the noise model).
     pub white: f64,
 }
 
@@ -63,10 +64,10 @@ pub(crate) struct Misfit {
 pub(crate) struct ObsValue {
     /// `r_k`, the residual that enters the cost.
     pub r: f64,
-    /// `d r_k / d x_k = psi'(e'_k) c_k w_k`.
+    /// `d r_k / d m_k = psi'(e'_k) u_k`.
     pub slope: f64,
-    /// `d r_k / d x_prev = -psi'(e'_k) c_k a_k w_prev` on the linked previous
-    /// observation (`links[k].prev`; 0 when there is none).
+    /// `d r_k / d z_prev = psi'(e'_k) v_k`, on the filtered wander of the
+    /// linked previous observation (`links[k].prev`; 0 when there is none).
     pub back: f64,
     /// `x_k - y_k` (m).
     pub metres: f64,
@@ -87,12 +88,12 @@ fn cauchy(e: f64, s: f64) -> (f64, f64) {
 }
 
 /// The residuals of the observations, computed in observation order: a
-/// whitened residual needs the previous fix's weighted residual.
+/// whitened residual needs the filtered wander of the fixes before it.
 pub(crate) struct Whitener<'a> {
     plan: &'a ObsPlan,
     obs: &'a [Observation],
-    /// `e_k = w_k (x_k - y_k)` of the observations seen so far.
-    e: Vec<f64>,
+    /// The filtered wander `z_k` of the observations seen so far (m).
+    z: Vec<f64>,
 }
 
 impl<'a> Whitener<'a> {
@@ -100,41 +101,38 @@ impl<'a> Whitener<'a> {
         Self {
             plan,
             obs,
-            e: vec![0.0; obs.len()],
+            z: vec![0.0; obs.len()],
         }
     }
 
     /// Misfit of observation `k` whose path value is `x`, in metres and
-    /// whitened (`e'_k`, before the robust loss); every observation before
-    /// `k` that `k` is linked to must have been seen.
+    /// whitened (`e'_k = u_k m_k + v_k z_prev`, before the robust loss);
+    /// every observation before `k` that `k` is linked to must have been seen.
     #[inline]
     pub fn misfit(&mut self, k: usize, x: f64) -> Misfit {
         let metres = x - self.plan.target[k];
-        let e = self.obs[k].w * metres;
-        self.e[k] = e;
         let link = self.plan.links[k];
-        let white = match link.prev {
-            Some(j) => link.c * (e - link.a * self.e[j]),
-            None => e,
-        };
-        Misfit { metres, white }
+        let z_prev = link.prev.map_or(0.0, |j| self.z[j]);
+        self.z[k] = link.alpha * z_prev + link.kappa * metres;
+        Misfit {
+            metres,
+            white: link.u * metres + link.v * z_prev,
+        }
     }
 
     /// Residual of observation `k` whose path value is `x` (see [`Self::misfit`]).
     #[inline]
     pub fn value(&mut self, k: usize, x: f64) -> ObsValue {
         let Misfit { metres, white } = self.misfit(k, x);
-        let o = &self.obs[k];
         let link = self.plan.links[k];
-        let w_prev = link.prev.map_or(0.0, |j| self.obs[j].w);
         let (r, d) = match self.plan.robust {
-            Some(s) if !o.baro => cauchy(white, s),
+            Some(s) if !self.obs[k].baro => cauchy(white, s),
             _ => (white, 1.0),
         };
         ObsValue {
             r,
-            slope: d * link.c * o.w,
-            back: -d * link.c * link.a * w_prev,
+            slope: d * link.u,
+            back: d * link.v,
             metres,
         }
     }
@@ -142,6 +140,44 @@ impl<'a> Whitener<'a> {
     /// Residuals of every observation, from their path values in order.
     pub fn all(mut self, x: impl Iterator<Item = f64>) -> Vec<ObsValue> {
         x.enumerate().map(|(k, x)| self.value(k, x)).collect()
+    }
+}
+
+/// The derivative of the filtered wander, carried forwards through the
+/// observations: `d z_k = alpha_k d z_prev + kappa_k d m_k` (see
+/// [`super::noise`]), for any linear form `T` of a misfit's derivative (a
+/// number, a Jacobian row). Each observation is the previous one of at most
+/// one later observation, so a derivative is dropped once it has been used.
+pub(crate) struct WanderDerivative<T> {
+    held: Vec<Option<T>>,
+    /// Whether a later observation is linked to each.
+    needed: Vec<bool>,
+}
+
+impl<T: Clone> WanderDerivative<T> {
+    pub fn new(links: &[Link]) -> Self {
+        let mut needed = vec![false; links.len()];
+        for l in links {
+            if let Some(j) = l.prev {
+                needed[j] = true;
+            }
+        }
+        Self {
+            held: vec![None; links.len()],
+            needed,
+        }
+    }
+
+    /// `d z_prev` of observation `k` (`None`: not linked, zero), taken out.
+    pub fn take_prev(&mut self, links: &[Link], k: usize) -> Option<T> {
+        links[k].prev.and_then(|j| self.held[j].take())
+    }
+
+    /// Record `d z_k` from `d z_prev` and `d m_k`, if a later observation needs it.
+    pub fn record(&mut self, k: usize, dz: impl FnOnce() -> T) {
+        if self.needed[k] {
+            self.held[k] = Some(dz());
+        }
     }
 }
 
@@ -183,7 +219,7 @@ impl ObsPlan {
 
 impl Model {
     /// Of every observation for a computed path: `x_k - y_k` (m, model minus
-    /// measurement) and its normalised innovation `e'_k = c_k (e_k - a_k e_{k-1})`
+    /// measurement) and its normalised innovation `e'_k = u_k m_k + v_k z_{k-1}`
     /// (see [`super::noise`]), before the robust loss: what the fit's noise
     /// model says is independent with unit variance.
     pub(crate) fn misfits(&self, theta: &[f64], path: &impl super::PathAt) -> Vec<Misfit> {

@@ -31,6 +31,11 @@ fn catalogue_model() -> Model {
 /// The catalogue with GPS errors correlated over `tau` (whitened residuals
 /// through the robust loss of `gps_outliers`, lag-interpolated fixes).
 fn catalogue_model_with(tau: Option<f64>) -> Model {
+    catalogue_model_with_noise(tau, 0.0)
+}
+
+/// ... and a jitter of `white` (m) on top of the wander.
+fn catalogue_model_with_noise(tau: Option<f64>, white: f64) -> Model {
     let sig = Arc::new(crate::testing::simulated_signals(
         4,
         60.0,
@@ -46,6 +51,7 @@ fn catalogue_model_with(tau: Option<f64>) -> Model {
         effects,
         segment_s: 7.0,
         gps_tau_s: tau,
+        gps_white_m: white,
         ..ModelSpec::default()
     };
     let m = Model::new(sig, spec).unwrap();
@@ -73,6 +79,7 @@ fn models() -> Vec<Model> {
         catalogue_model(),
         correlated_model(Increment::Exact, Some(0.01), Some(20.0)),
         catalogue_model_with(Some(45.0)),
+        catalogue_model_with_noise(Some(45.0), 1.5),
     ]
 }
 
@@ -227,6 +234,7 @@ fn chain_solver_gives_the_dense_lm_step() {
         full,
         correlated_model(Increment::Exact, Some(0.01), Some(20.0)),
         catalogue_model_with(Some(45.0)),
+        catalogue_model_with_noise(Some(45.0), 1.5),
     ] {
         for roles in [
             vec![effects::Role::Global, effects::Role::Segments],

@@ -169,10 +169,14 @@ mod tests {
     use super::*;
     use crate::model::ModelSpec;
 
+    /// Independent fixes, a wander alone, a wander with a jitter (see `noise`).
+    const NOISES: [(Option<f64>, f64); 3] = [(None, 0.0), (Some(20.0), 0.0), (Some(20.0), 1.2)];
+
     /// A 90-second ride's model at slightly perturbed starting values, its
     /// free mask, its dense linearisation and `(J^T J)^-1`.
     fn dense_case(
         tau: Option<f64>,
+        white: f64,
     ) -> (
         Model,
         Vec<f64>,
@@ -183,6 +187,7 @@ mod tests {
         let sig = Arc::new(crate::testing::simulated_signals(6, 90.0, &[]));
         let spec = ModelSpec {
             gps_tau_s: tau,
+            gps_white_m: white,
             ..ModelSpec::default()
         };
         let m = Model::new(sig, spec).unwrap();
@@ -204,8 +209,8 @@ mod tests {
     /// derivative with respect to every free parameter; white and correlated.
     #[test]
     fn path_and_parameter_covariances_equal_the_dense_inverse() {
-        for tau in [None, Some(20.0)] {
-            let (m, p, free, lin, inv) = dense_case(tau);
+        for (tau, white) in NOISES {
+            let (m, p, free, lin, inv) = dense_case(tau, white);
             let sig = m.signals.clone();
             let chain = m.chain_system(&p, &free).expect("chain");
             assert_eq!(chain.columns(), &lin.columns[..]);
@@ -272,8 +277,8 @@ mod tests {
     /// rows pinning the chain's state carry a finite weight, see `chain`).
     #[test]
     fn global_sigmas_from_the_chain_equal_the_dense_inverse() {
-        for tau in [None, Some(20.0)] {
-            let (m, p, _, lin, inv) = dense_case(tau);
+        for (tau, white) in NOISES {
+            let (m, p, _, lin, inv) = dense_case(tau, white);
             let inflation = m.residual_inflation(&p);
             let sigmas: Vec<Option<f64>> = m
                 .parameter_sigmas(&p)
