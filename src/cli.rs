@@ -216,8 +216,9 @@ pub struct SettingsArgs {
     /// for the paper's model without prior.
     #[arg(long, default_value_t = DEFAULT_BIAS_WALK.to_string())]
     pub bias_walk: String,
-    /// GPS noise: `auto` (sigma and correlation time estimated from the ride),
-    /// `SIGMA` in m (independent fixes), or `SIGMA,TAU` (error correlated over TAU s).
+    /// GPS noise: `auto` (wander, correlation time and jitter estimated from the
+    /// ride), `SIGMA` in m (independent fixes), `SIGMA,TAU` (an error wandering
+    /// over TAU s) or `SIGMA,TAU,JITTER` (plus a jitter of JITTER m per fix).
     #[arg(long, alias = "gps-sigma", default_value = "auto")]
     pub gps_noise: String,
     /// Increment map: exact exponential or the paper's small-angle quaternion.
@@ -290,20 +291,29 @@ impl SettingsArgs {
                 format!("--bias-walk: '{v}' is not a number, 'auto' or 'none'")
             })?),
         };
-        let (sigma, tau) = match self.gps_noise.trim() {
-            "auto" => (ModelSpec::default().sigma_horizontal_m, None),
+        let (sigma, tau, white) = match self.gps_noise.trim() {
+            "auto" => (ModelSpec::default().sigma_horizontal_m, None, 0.0),
             v => {
-                let bad = || format!("--gps-noise: '{v}' is not 'auto', SIGMA or SIGMA,TAU");
+                let bad = || {
+                    format!(
+                        "--gps-noise: '{v}' is not 'auto', SIGMA, SIGMA,TAU or SIGMA,TAU,JITTER"
+                    )
+                };
                 let mut parts = v.split(',').map(str::trim);
                 let sigma: f64 = parts.next().unwrap_or("").parse().with_context(bad)?;
                 let tau: Option<f64> = parts
                     .next()
                     .map(|t| t.parse::<f64>().with_context(bad))
                     .transpose()?;
+                let white: f64 = match parts.next() {
+                    Some(w) if tau.is_some() => w.parse().with_context(bad)?,
+                    Some(_) => anyhow::bail!(bad()),
+                    None => 0.0,
+                };
                 if parts.next().is_some() {
                     anyhow::bail!(bad());
                 }
-                (sigma, tau)
+                (sigma, tau, white)
             }
         };
         Ok(FitSettings {
@@ -317,6 +327,7 @@ impl SettingsArgs {
                 bias_walk_dps_sqrt_s: walk,
                 sigma_horizontal_m: sigma,
                 gps_tau_s: tau,
+                gps_white_m: white,
                 increment: match self.increment {
                     IncrementArg::Exact => Increment::Exact,
                     IncrementArg::SmallAngle => Increment::SmallAngle,
@@ -628,7 +639,8 @@ fn print_summary(r: &FitReport) {
             "noise     GPS sigma {:.2} m, {}, bias walk {} (set)",
             r.gps_sigma_m,
             r.gps_tau_s.map_or("independent fixes".into(), |t| format!(
-                "correlated over {t:.0} s"
+                "correlated over {t:.0} s, jitter {:.2} m",
+                r.gps_white_m
             )),
             r.bias_walk
                 .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))

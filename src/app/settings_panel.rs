@@ -47,8 +47,8 @@ impl GyropathApp {
         changed |= ui
             .checkbox(&mut fit.auto_noise.gps, "GPS noise from the ride")
             .on_hover_text(
-                "estimate the GPS sigma and the correlation time of its error by restricted \
-                 marginal likelihood once step 2 has converged; off = set them here",
+                "estimate the GPS error's wander (sigma, correlation time) and jitter by \
+                 restricted marginal likelihood once step 2 has converged; off = set them here",
             )
             .changed();
         if !fit.auto_noise.gps {
@@ -74,6 +74,16 @@ impl GyropathApp {
                         egui::Slider::new(t, 0.5..=1800.0)
                             .logarithmic(true)
                             .text("correlation time (s)"),
+                    )
+                    .changed();
+                changed |= ui
+                    .add(
+                        egui::Slider::new(&mut fit.model.gps_white_m, 0.0..=10.0)
+                            .text("jitter per fix (m)"),
+                    )
+                    .on_hover_text(
+                        "white error of each fix on top of the wander, scaled by the fix's \
+                         logged accuracy",
                     )
                     .changed();
             }
@@ -116,6 +126,9 @@ impl GyropathApp {
                     ui.end_row();
                     ui.label("GPS error");
                     ui.label(n.tau_text());
+                    ui.end_row();
+                    ui.label("GPS jitter");
+                    ui.label(n.gps_white_m.describe("m", 2));
                     ui.end_row();
                     ui.label("bias walk");
                     ui.label(n.walk_text("°/s/√s"));

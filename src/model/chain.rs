@@ -530,6 +530,10 @@ fn triangularise(a: &mut DMatrix<f64>, n: usize, tri: usize) {
                 .iter()
                 .rposition(|&x| x != 0.0)
                 .map_or(0, |p| p + 1);
+        if to == from {
+            // Nothing below the diagonal: the row stays as it is.
+            continue;
+        }
         let norm = (col[j] * col[j] + dot(&col[from..to], &col[from..to])).sqrt();
         if norm == 0.0 {
             continue;

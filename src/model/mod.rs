@@ -256,14 +256,15 @@ impl Model {
         let mut observations = Vec::new();
         let h_scale = accuracy_scale(signals.fixes.iter().map(|f| f.hacc));
         let v_scale = accuracy_scale(signals.fixes.iter().map(|f| f.vacc));
-        // (wander, jitter) of a GPS axis of sigma `sigma`: the jitter alone,
-        // scaled per fix, for independent fixes; with a correlation time the
-        // wander is the setting and the jitter keeps the horizontal ratio.
+        // (wander, jitter) of a GPS axis of sigma `sigma`, each scaled by the
+        // fix's accuracy: the jitter alone for independent fixes; with a
+        // correlation time the wander is the setting and the jitter keeps the
+        // horizontal ratio.
         let correlated = spec.gps_tau_s.is_some_and(|t| t > 0.0);
         let split = |sigma: f64, acc: Option<f64>, scale: Option<f64>| {
             if correlated {
                 let white = sigma * spec.gps_white_m / spec.sigma_horizontal_m;
-                (sigma, fix_sigma(white, acc, scale))
+                (fix_sigma(sigma, acc, scale), fix_sigma(white, acc, scale))
             } else {
                 (0.0, fix_sigma(sigma, acc, scale))
             }

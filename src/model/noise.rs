@@ -10,16 +10,24 @@
 //!
 //! ```text
 //! m_k = x_k - y_k = g_k + v_k
-//! g_k = a_k g_{k-1} + sqrt(1 - a_k^2) sigma_g n_k,   a_k = exp(-dt_k / tau)   the wander (stationary sd sigma_g)
-//! v_k ~ N(0, R_k),  R_k = (sigma_w acc_k / median(acc))^2                       the jitter
+//! g_k = a_k g_{k-1} + sqrt(1 - a_k^2) q_k n_k,   a_k = exp(-dt_k / tau)   the wander
+//! v_k ~ N(0, R_k)                                                          the jitter
+//! q_k = sigma_g acc_k / median(acc),  sqrt(R_k) = sigma_w acc_k / median(acc)
 //! ```
+//!
+//! A fix the receiver rates worse has a larger jitter and lets the wander
+//! move faster (a street canyon's multipath), but a wander that stays put
+//! stays cheap whatever the ratings do: an earlier model whitened the misfits
+//! divided by each fix's sigma, and on the Husky, whose ratings step between
+//! 0.8 and 1.2 m from fix to fix, a constant 1 m offset then read as an error
+//! jumping at every step (its cost rose by 100 where the model allows 0.44).
 //!
 //! Its whitening is the Kalman filter of `g` (a scalar per axis, independent
 //! of the path's parameters, so its gains are fixed numbers): with `z_k` the
 //! filtered wander and `P_k` its variance,
 //!
 //! ```text
-//! S_k  = a_k^2 P_{k-1} + (1 - a_k^2) sigma_g^2 + R_k      innovation variance
+//! S_k  = a_k^2 P_{k-1} + (1 - a_k^2) q_k^2 + R_k          innovation variance
 //! e'_k = (m_k - a_k z_{k-1}) / sqrt(S_k) = u_k m_k + v_k z_{k-1}   the innovation: independent, unit variance
 //! K_k  = (S_k - R_k) / S_k,  z_k = (1 - K_k) a_k z_{k-1} + K_k m_k = alpha_k z_{k-1} + kappa_k m_k
 //! P_k  = (1 - K_k)(S_k - R_k)
@@ -29,8 +37,8 @@
 //! one), and `sum_k ln S_k` is the log-determinant of the errors' covariance.
 //! The first fix of a chain, and the first after an outage longer than
 //! [`OUTAGE_S`] (the receiver re-acquires and its error starts afresh), has
-//! `a = 0`: `S = sigma_g^2 + R`. Without a jitter (`R = 0`) the filter is
-//! exact after one fix and `e'_k = (m_k - a_k m_{k-1}) / (sigma_g sqrt(1 - a_k^2))`;
+//! `a = 0`: `S = q^2 + R`. Without a jitter (`R = 0`) the filter is
+//! exact after one fix and `e'_k = (m_k - a_k m_{k-1}) / (q_k sqrt(1 - a_k^2))`;
 //! without a correlation time every fix is independent with `S_k = sigma_k^2`,
 //! the paper's least squares with per-fix weights.
 //!
@@ -122,49 +130,81 @@ pub(crate) fn links(obs: &[Observation], tau: Option<f64>) -> Vec<Link> {
         .collect()
 }
 
-/// A first guess of the GPS sigma per axis and the correlation time from
-/// horizontal misfits `(t, axis, x - y)` of a fitted path: the RMS misfit,
-/// and `tau = -dt / ln rho_1` from the lag-one correlation `rho_1` of
-/// consecutive fixes (linked as [`links`] links them, `dt` their median
-/// spacing). Biased low, both (the fitted path leans towards the fixes), but
-/// within a small factor of what the likelihood prefers, where a
-/// search started from the settings as set may begin tens of times off.
-/// `None` with fewer than ten linked pairs or no positive correlation.
-pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64)> {
+/// A first guess of the GPS error's wander (sigma per axis, correlation
+/// time) and jitter from horizontal misfits `(t, axis, x - y)` of a fitted
+/// path, by moments: the variance, the lag-one covariance and the mean
+/// square of the second differences `m_{k+1} - 2 m_k + m_{k-1}` of
+/// consecutive misfits fit the three (when they do not, the second
+/// differences' median absolute deviation gives the jitter alone,
+/// `sqrt(R) = 1.4826 MAD / sqrt(6)`, and the wander is the rest);
+/// `tau = -dt / ln rho` from the wander's lag-one correlation `rho` (`dt` the
+/// median spacing). Biased low (the
+/// fitted path leans towards the fixes), but within a small factor of what
+/// the likelihood prefers, where a search started from the settings as set
+/// may begin tens of times off. `None` with fewer than ten linked pairs or
+/// no positive correlation.
+pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64, f64)> {
     let n = misfits.len();
     if n == 0 {
         return None;
     }
-    let sigma = (misfits.iter().map(|m| m.2 * m.2).sum::<f64>() / n as f64).sqrt();
-    let mut last: [Option<(f64, f64)>; 2] = [None; 2];
+    let var = misfits.iter().map(|m| m.2 * m.2).sum::<f64>() / n as f64;
+    // Per axis the last two misfits (t, m) of the current chain.
+    let mut last: [[Option<(f64, f64)>; 2]; 2] = [[None; 2]; 2];
     let (mut cross, mut sq_prev, mut sq_here) = (0.0, 0.0, 0.0);
     let mut spacing = Vec::new();
+    let mut second = Vec::new();
     for &(t, axis, e) in misfits {
         let axis = axis.min(1);
-        if let Some((tp, ep)) = last[axis]
-            && t > tp
-            && t - tp <= OUTAGE_S
-        {
-            cross += e * ep;
-            sq_prev += ep * ep;
-            sq_here += e * e;
-            spacing.push(t - tp);
+        match last[axis][0] {
+            Some((tp, ep)) if t > tp && t - tp <= OUTAGE_S => {
+                cross += e * ep;
+                sq_prev += ep * ep;
+                sq_here += e * e;
+                spacing.push(t - tp);
+                if let Some((tpp, epp)) = last[axis][1]
+                    && ((t - tp) - (tp - tpp)).abs() < 0.2 * (t - tp)
+                {
+                    second.push((e - 2.0 * ep + epp).abs());
+                }
+                last[axis] = [Some((t, e)), Some((tp, ep))];
+            }
+            _ => last[axis] = [Some((t, e)), None],
         }
-        last[axis] = Some((t, e));
     }
-    if spacing.len() < 10 || sigma.is_nan() || sigma <= 0.0 {
+    if spacing.len() < 10 || !(var.is_finite() && var > 0.0) {
         return None;
     }
-    let rho = cross / (sq_prev * sq_here).sqrt();
+    // Moments of a wander (variance w, lag-one correlation a) plus jitter R:
+    // var = w + R, c1 = w a, E d2^2 = 6 R + w (6 - 8 a + 2 a^2), so
+    // w = 2 c1^2 / (E d2^2 - 6 var + 8 c1); else the robust jitter alone.
+    let c1 = cross / (sq_prev * sq_here).sqrt() * var;
+    let mut wander = f64::NAN;
+    if second.len() >= 10 {
+        let d2 = second.iter().map(|d| d * d).sum::<f64>() / second.len() as f64;
+        let denominator = d2 - 6.0 * var + 8.0 * c1;
+        if denominator > 0.0 {
+            wander = 2.0 * c1 * c1 / denominator;
+        }
+        if !(wander > 0.01 * var && wander < var && c1 < wander) {
+            second.sort_by(f64::total_cmp);
+            let r = 1.4826 * second[second.len() / 2] / 6f64.sqrt();
+            wander = var - r.min(0.9 * var.sqrt()).powi(2);
+        }
+    } else {
+        wander = var;
+    }
+    let jitter = (var - wander).max(0.0).sqrt();
+    let rho = c1 / wander;
     spacing.sort_by(f64::total_cmp);
     let dt = spacing[spacing.len() / 2];
-    (rho > 0.0 && rho < 1.0).then(|| (sigma, -dt / rho.ln()))
+    (rho > 0.0).then(|| (wander.sqrt(), -dt / rho.min(0.999).ln(), jitter))
 }
 
 impl Model {
     /// [`gps_noise_guess`] from the horizontal misfits of the path values `x`
     /// (one per observation, as a linearisation holds them) at `theta`.
-    pub(crate) fn gps_noise_guess(&self, theta: &[f64], x: &[f64]) -> Option<(f64, f64)> {
+    pub(crate) fn gps_noise_guess(&self, theta: &[f64], x: &[f64]) -> Option<(f64, f64, f64)> {
         let plan = self.obs_plan(theta);
         let misfits: Vec<(f64, usize, f64)> = self
             .observations
@@ -232,10 +272,11 @@ mod tests {
     }
 
     #[test]
-    fn the_guess_recovers_a_gauss_markov_error() {
-        // Two axes of 1 Hz fixes, sigma 2 m, tau 15 s, an outage in the middle.
+    fn the_guess_recovers_a_wander_and_its_jitter() {
+        // Two axes of 1 Hz fixes, wander 2 m over 15 s plus 0.5 m of jitter,
+        // an outage in the middle.
         let mut rng = crate::simulation::rng::Rng::new(5);
-        let (sigma, tau) = (2.0, 15.0);
+        let (sigma, tau, jitter) = (2.0, 15.0, 0.5);
         let a = (-1.0f64 / tau).exp();
         let mut misfits = Vec::new();
         let mut n = [sigma * rng.normal(), sigma * rng.normal()];
@@ -243,16 +284,17 @@ mod tests {
             let t = k as f64 + if k >= 2000 { 60.0 } else { 0.0 };
             for (axis, e) in n.iter_mut().enumerate() {
                 *e = a * *e + (1.0 - a * a).sqrt() * sigma * rng.normal();
-                misfits.push((t, axis, *e));
+                misfits.push((t, axis, *e + jitter * rng.normal()));
             }
         }
-        let (s, t) = gps_noise_guess(&misfits).unwrap();
+        let (s, t, j) = gps_noise_guess(&misfits).unwrap();
         assert!((s / sigma - 1.0).abs() < 0.1, "sigma {s}");
-        assert!((t / tau - 1.0).abs() < 0.25, "tau {t}");
+        assert!((t / tau - 1.0).abs() < 0.3, "tau {t}");
+        assert!((j / jitter - 1.0).abs() < 0.2, "jitter {j}");
         // White errors: no positive correlation, no guess of tau.
         let white: Vec<_> = (0..400).map(|k| (k as f64, 0, rng.normal())).collect();
         let guess = gps_noise_guess(&white);
-        assert!(guess.is_none_or(|(_, t)| t < 1.0), "{guess:?}");
+        assert!(guess.is_none_or(|(_, t, _)| t < 1.0), "{guess:?}");
         assert_eq!(gps_noise_guess(&white[..5]), None, "too few pairs");
     }
 
