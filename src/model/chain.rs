@@ -39,6 +39,7 @@
 
 use nalgebra::{DMatrix, DMatrixView, DVector, Vector3};
 
+use super::noise::next_in_chain;
 use super::normal::{ChainLinearisation, V9};
 
 /// Weight of the rows that pin the initial state `s` to zero.
@@ -68,6 +69,8 @@ pub struct ChainSystem {
     prior_at: Vec<Vec<usize>>,
     /// Prior entries grouped by row: `(free column, value)`.
     prior_rows: Vec<Vec<(usize, f64)>>,
+    /// The observation linked to each (see [`next_in_chain`]).
+    next_in_chain: Vec<Option<usize>>,
 }
 
 /// The rows of the path whose covariance [`ChainSystem::marginals`] prepares.
@@ -316,7 +319,7 @@ struct Cursor {
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Unknown {
     Block(usize),
-    /// Numbered in the order the forward pass adds them.
+    /// The wander of observation `o`.
     Wander(usize),
 }
 
@@ -631,24 +634,20 @@ impl ChainSystem {
                 .map(|v| v * v)
                 .sum();
         }
+        let next_in_chain = next_in_chain(links);
         let mut hz = vec![V9::zeros(); no];
         let mut htilde = vec![V9::zeros(); no];
-        let mut next_in_chain = vec![usize::MAX; no];
         for o in 0..no {
             let (m, n) = lin.slope[o];
             let l = links[o];
             let prev = l.prev.map_or(V9::zeros(), |j| hz[j]);
-            if let Some(j) = l.prev {
-                next_in_chain[j] = o;
-            }
             hz[o] = prev * l.alpha + lin.h[o] * l.kappa;
             htilde[o] = lin.h[o] * m + prev * n;
         }
         let mut q = vec![V9::zeros(); no];
         let mut r2 = vec![0.0; no];
         for j in (0..no).rev() {
-            let s = next_in_chain[j];
-            if s != usize::MAX {
+            if let Some(s) = next_in_chain[j] {
                 let (n, a) = (lin.slope[s].1, links[s].alpha);
                 q[j] = htilde[s] * n + q[s] * a;
                 r2[j] = n * n + a * a * r2[s];
@@ -746,6 +745,7 @@ impl ChainSystem {
             block_of,
             prior_at,
             prior_rows,
+            next_in_chain,
         })
     }
 
@@ -975,13 +975,6 @@ impl ChainSystem {
             pending: Vec::new(),
             origin: Vector3::zeros(),
         };
-        // The observation linked to each (`usize::MAX`: none).
-        let mut next_in_chain = vec![usize::MAX; lin.r.len()];
-        for (o, l) in lin.links.iter().enumerate() {
-            if let Some(j) = l.prev {
-                next_in_chain[j] = o;
-            }
-        }
         let mut ops: Vec<Op> = Vec::new();
         // Heavy rows defining a wander (each adds exactly its weight squared to the determinant).
         let mut constraint_log_det = 0.0;
@@ -1127,35 +1120,38 @@ impl ChainSystem {
             // previous observation's wander an unknown of its own.
             let (m, back) = lin.slope[o];
             let link = lin.links[o];
-            let dx: Vec<f64> = r[..n].to_vec();
-            for v in &mut r {
-                *v *= m;
-            }
-            if let Some(c) = link.prev.and_then(|j| work.wander_col(j)) {
-                r[c] += back;
-            }
-            r[n] = -lin.r[o];
-            work.pending.push(r);
+            let prev_col = link.prev.and_then(|j| work.wander_col(j));
             // This observation's wander, for the next one linked to it:
-            // z_o = alpha_o z_prev + kappa_o dx_o, held by a heavy row; then
-            // the previous wander, which nothing ahead depends on any more, goes.
-            if let Some(&next) = next_in_chain.get(o).filter(|&&k| k != usize::MAX) {
-                let prev_col = link.prev.and_then(|j| work.wander_col(j));
-                wander_at[o] = ops.len();
-                work.open_wander(o);
-                // Heavy against the row that will read it: a constraint, not a prior.
+            // z_o = alpha_o z_prev + kappa_o dx_o, held by a heavy row (over
+            // the columns after the wander's, which goes first) that is
+            // heavy against the row that will read it: a constraint, not a prior.
+            let wander = self.next_in_chain[o].map(|next| {
                 let w = WANDER_PIN * (1.0 + lin.slope[next].1.abs());
                 let mut c = vec![0.0; n + 2];
                 c[0] = w;
-                for (k, d) in dx.iter().enumerate() {
+                for (k, d) in r[..n].iter().enumerate() {
                     c[k + 1] = -w * link.kappa * d;
                 }
                 if let Some(p) = prev_col {
                     c[p + 1] -= w * link.alpha;
                 }
+                (c, w)
+            });
+            for v in &mut r {
+                *v *= m;
+            }
+            if let Some(c) = prev_col {
+                r[c] += back;
+            }
+            r[n] = -lin.r[o];
+            work.pending.push(r);
+            if let Some((c, w)) = wander {
+                wander_at[o] = ops.len();
+                work.open_wander(o);
                 work.pending.push(c);
                 constraint_log_det += 2.0 * w.ln();
             }
+            // The previous wander: nothing ahead depends on it any more.
             if let Some(j) = link.prev
                 && let Some(op) = work.eliminate_wander(j)
             {

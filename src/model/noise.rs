@@ -87,6 +87,18 @@ impl Link {
     }
 }
 
+/// The observation linked to each (`links[o].prev == Some(j)` makes `o` the
+/// next of `j`; each has at most one, the next fix's observation of its axis).
+pub(crate) fn next_in_chain(links: &[Link]) -> Vec<Option<usize>> {
+    let mut next = vec![None; links.len()];
+    for (o, l) in links.iter().enumerate() {
+        if let Some(j) = l.prev {
+            next[j] = Some(o);
+        }
+    }
+    next
+}
+
 /// The whitening of every observation: GPS observations of one axis are
 /// linked to the previous fix's when the model has a correlation time and a
 /// wander (`sd_gm > 0`); barometric rows never are (the barometer's noise is

@@ -156,15 +156,12 @@ pub(crate) struct WanderDerivative<T> {
 
 impl<T: Clone> WanderDerivative<T> {
     pub fn new(links: &[Link]) -> Self {
-        let mut needed = vec![false; links.len()];
-        for l in links {
-            if let Some(j) = l.prev {
-                needed[j] = true;
-            }
-        }
         Self {
             held: vec![None; links.len()],
-            needed,
+            needed: noise::next_in_chain(links)
+                .iter()
+                .map(Option::is_some)
+                .collect(),
         }
     }
 
