@@ -52,11 +52,33 @@ fn main() -> anyhow::Result<()> {
                 continue;
             };
             let truth = sim.truth_in(&sig.frame);
+            let (mut here, mut rows, mut d2_sum) = (0usize, 0usize, 0.0);
+            let mut by_tenth = [(0usize, 0usize); 10];
             for j in (0..sig.len()).step_by(100) {
                 let (de, dn) = (path[j].x - truth[j].x, path[j].y - truth[j].y);
-                inside += usize::from(u.mahalanobis2(j, de, dn) <= 5.991);
-                total += 1;
+                let d2 = u.mahalanobis2(j, de, dn);
+                let ok = d2 <= 5.991;
+                here += usize::from(ok);
+                rows += 1;
+                d2_sum += d2;
+                let tenth = &mut by_tenth[(10 * j / sig.len()).min(9)];
+                tenth.0 += usize::from(ok);
+                tenth.1 += 1;
             }
+            inside += here;
+            total += rows;
+            let tenths: Vec<String> = by_tenth
+                .iter()
+                .map(|(a, b)| format!("{:.0}", 100.0 * *a as f64 / (*b).max(1) as f64))
+                .collect();
+            println!(
+                "  seed {seed}: {:.1} % inside, mean d2 {:.2} (2 if calibrated), by tenth [{}]; {}",
+                100.0 * here as f64 / rows.max(1) as f64,
+                d2_sum / rows.max(1) as f64,
+                tenths.join(" "),
+                fit.noise()
+                    .map_or("noise as set".to_string(), |n| n.describe())
+            );
         }
         println!(
             "{label:>22}: {:.1} % of {total} rows inside the 95 % ellipse",

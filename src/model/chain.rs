@@ -492,6 +492,58 @@ impl Work {
         }
     }
 
+    /// Hand the wander in column `c` on to observation `o` in place, given
+    /// `o`'s residual row `r` (which reads the old wander in column `c`) and
+    /// the heavy row `h` defining the new one, laid out over (old wander, the
+    /// array's columns with column `c` the new wander, right-hand side).
+    ///
+    /// Only rows with an entry in column `c` involve the old wander: the
+    /// triangle's rows `0..=c` (the wander columns come first), pending rows
+    /// that read it, `r` and `h`. Their QR over (old wander, columns `0..=c`)
+    /// gives the old wander's row for the backward pass, the triangle's new
+    /// rows `0..=c` (the new wander now leads row `c`) and rows without any
+    /// entry there, which wait in `pending`. So a fix costs O(c n) instead of
+    /// a new column, a compression and a permuted copy of the whole array.
+    fn pass_wander(&mut self, c: usize, o: usize, r: Vec<f64>, h: Vec<f64>) -> Op {
+        let n = self.n();
+        let (reading, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut self.pending)
+            .into_iter()
+            .partition(|p| p[c] != 0.0);
+        self.pending = rest;
+        let nl = c + 1 + reading.len() + 2;
+        let mut a = DMatrix::<f64>::zeros(nl, n + 2);
+        let put = |a: &mut DMatrix<f64>, i: usize, at: &dyn Fn(usize) -> f64| {
+            a[(i, 0)] = at(c);
+            for k in (0..=n).filter(|&k| k != c) {
+                a[(i, k + 1)] = at(k);
+            }
+        };
+        for i in 0..=c {
+            put(&mut a, i, &|k| self.rows[(i, k)]);
+        }
+        for (i, p) in reading.iter().chain([&r]).enumerate() {
+            put(&mut a, c + 1 + i, &|k| p[k]);
+        }
+        for (k, v) in h.into_iter().enumerate() {
+            a[(nl - 1, k)] = v;
+        }
+        triangularise(&mut a, c + 2, 0);
+        for i in 0..=c {
+            for k in 0..=n {
+                self.rows[(i, k)] = a[(i + 1, k + 1)];
+            }
+        }
+        for i in c + 2..nl {
+            self.pending.push((0..=n).map(|k| a[(i, k + 1)]).collect());
+        }
+        let prev = std::mem::replace(&mut self.wander[c], o);
+        Op::Eliminate {
+            what: Unknown::Wander(prev),
+            rows: a.rows(0, 1).into_owned(),
+            rest: self.front(),
+        }
+    }
+
     /// Eliminate the wander of observation `o` once nothing ahead depends on it.
     fn eliminate_wander(&mut self, o: usize) -> Option<Op> {
         let at = self.wander_col(o)?;
@@ -1144,18 +1196,30 @@ impl ChainSystem {
                 r[c] += back;
             }
             r[n] = -lin.r[o];
-            work.pending.push(r);
-            if let Some((c, w)) = wander {
-                wander_at[o] = ops.len();
-                work.open_wander(o);
-                work.pending.push(c);
-                constraint_log_det += 2.0 * w.ln();
-            }
-            // The previous wander: nothing ahead depends on it any more.
-            if let Some(j) = link.prev
-                && let Some(op) = work.eliminate_wander(j)
-            {
-                ops.push(op);
+            match (prev_col, wander) {
+                // The common case, in place: the previous wander's column
+                // becomes this one's (see `Work::pass_wander`).
+                (Some(p), Some((mut c, w))) if work.rows.nrows() > p => {
+                    c.swap(0, p + 1);
+                    wander_at[o] = ops.len();
+                    ops.push(work.pass_wander(p, o, r, c));
+                    constraint_log_det += 2.0 * w.ln();
+                }
+                (_, wander) => {
+                    work.pending.push(r);
+                    if let Some((c, w)) = wander {
+                        wander_at[o] = ops.len();
+                        work.open_wander(o);
+                        work.pending.push(c);
+                        constraint_log_det += 2.0 * w.ln();
+                    }
+                    // The previous wander: nothing ahead depends on it any more.
+                    if let Some(j) = link.prev
+                        && let Some(op) = work.eliminate_wander(j)
+                    {
+                        ops.push(op);
+                    }
+                }
             }
             if work.pending.len() >= 2 * work.n() {
                 work.compress();

@@ -81,6 +81,21 @@ pub struct Estimated {
     pub high: f64,
     /// Estimated (`false`: held at the value given).
     pub estimated: bool,
+    /// Whether the ride only bounds the setting from one side.
+    #[serde(default)]
+    pub limit: Limit,
+}
+
+/// A setting the likelihood keeps pushing to the edge of the search: the
+/// ride cannot tell how far beyond it the setting lies (a correlation time
+/// longer than the ride, a jitter too small to see), only that it is beyond
+/// `low` (`AtLeast`) or within `high` (`AtMost`), at 1 sigma.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Limit {
+    #[default]
+    None,
+    AtLeast,
+    AtMost,
 }
 
 impl Estimated {
@@ -90,12 +105,18 @@ impl Estimated {
             low: value,
             high: value,
             estimated: false,
+            limit: Limit::None,
         }
     }
 
-    /// `value` with its range, e.g. "2.1 m (1.8-2.5)".
+    /// `value` with its range, e.g. "2.1 m (1.8-2.5)", or its one-sided
+    /// bound, e.g. "at most 0.03 m".
     pub fn describe(&self, unit: &str, digits: usize) -> String {
-        if self.estimated {
+        if self.limit == Limit::AtLeast {
+            format!("at least {:.d$} {unit}", self.low, d = digits)
+        } else if self.limit == Limit::AtMost {
+            format!("at most {:.d$} {unit}", self.high, d = digits)
+        } else if self.estimated {
             format!(
                 "{:.d$} {unit} ({:.d$}-{:.d$})",
                 self.value,
@@ -141,7 +162,12 @@ impl NoiseEstimate {
 
     /// The GPS error's correlation in words: "correlated over 3 s (2-4)", or independent fixes.
     pub fn tau_text(&self) -> String {
-        if self.gps_tau_s.value > 0.0 {
+        if self.gps_tau_s.limit == Limit::AtLeast {
+            format!(
+                "correlated over {}: longer than this ride can tell apart (only the drift sigma^2 / tau shows)",
+                self.gps_tau_s.describe("s", 0)
+            )
+        } else if self.gps_tau_s.value > 0.0 {
             format!("correlated over {}", self.gps_tau_s.describe("s", 0))
         } else {
             "independent fixes (set)".to_string()
@@ -187,10 +213,21 @@ fn no_jitter() -> Estimated {
 /// (deg/s/sqrt(s)), jitter (m; at the floor the fixes have none to speak of).
 const BOUNDS: [(f64, f64); 4] = [(0.05, 100.0), (0.3, 1800.0), (1e-5, 0.5), (0.01, 100.0)];
 
-/// The search stops when the simplex is this small in every log-setting: a
-/// quarter of a typical 1-sigma range (0.02 took 139 likelihoods on a
-/// 30-minute ride instead of 75, to move the settings well inside their ranges).
-const NM_TOLERANCE: f64 = 0.05;
+/// The search stops when the simplex is this small in every log-setting (a
+/// quarter of a typical 1-sigma range: 0.02 took 139 likelihoods on a
+/// 30-minute ride instead of 75, to move the settings well inside their
+/// ranges), or when its corners' `-2 ln L` are this close (all within half a
+/// sigma of each other: along a ridge, such as `sigma^2 / tau` when tau nears
+/// the ride's length, the simplex otherwise crawls on with nothing to gain).
+const NM_TOLERANCE: Tolerance = Tolerance { x: 0.05, f: 0.2 };
+
+/// When [`nelder_mead`] stops: the simplex's size in every coordinate, or the
+/// spread of its values.
+#[derive(Clone, Copy, Debug)]
+struct Tolerance {
+    x: f64,
+    f: f64,
+}
 
 /// Correlation time the search starts from when none is set (s).
 const START_TAU_S: f64 = 20.0;
@@ -210,9 +247,20 @@ fn point(spec: &ModelSpec) -> [f64; 4] {
     ]
 }
 
-fn clamp(x: [f64; 4]) -> [f64; 4] {
+/// The search's bounds for a ride whose fixes span `span` seconds: a
+/// correlation time longer than the ride is no longer identified (a wander
+/// that slow is an offset plus a drift over the ride, and only the drift
+/// `sigma^2 / tau` shows), so the search stops at the ride's length and says
+/// the time is at least that long.
+fn bounds_for(span: f64) -> [(f64, f64); 4] {
+    let mut b = BOUNDS;
+    b[1].1 = span.clamp(10.0 * b[1].0, b[1].1);
+    b
+}
+
+fn clamp(x: [f64; 4], bounds: &[(f64, f64); 4]) -> [f64; 4] {
     let mut y = x;
-    for (v, (lo, hi)) in y.iter_mut().zip(BOUNDS) {
+    for (v, (lo, hi)) in y.iter_mut().zip(bounds) {
         *v = v.clamp(lo.ln(), hi.ln());
     }
     y
@@ -277,6 +325,12 @@ pub fn estimate(
     .collect();
     // The path's derivatives do not depend on the noise: linearise once.
     let base = model.chain_system(theta, free)?;
+    let fixes = &model.signals.fixes;
+    let span = fixes
+        .last()
+        .zip(fixes.first())
+        .map_or(0.0, |(l, f)| l.t - f.t);
+    let bounds = bounds_for(span);
     let mut x0 = point(spec);
     // The GPS settings start from the fit's own misfits, not from the
     // settings as set (3 m and 20 s, typically tens of times off): a
@@ -288,73 +342,132 @@ pub fn estimate(
         x0[1] = tau.ln();
         x0[3] = jitter.max(BOUNDS[3].0).ln();
     }
-    let x0 = clamp(x0);
+    let x0 = clamp(x0, &bounds);
     let evaluations = AtomicUsize::new(0);
-    let f = |y: &[f64]| -> f64 {
-        let mut x = x0;
-        for (&d, &v) in dims.iter().zip(y) {
-            x[d] = v;
-        }
+    // -2 ln L at a log-space point; outside the bounds the clamped value
+    // plus a wall, so that a search turns back.
+    let at = |x: [f64; 4]| -> f64 {
         evaluations.fetch_add(1, Ordering::Relaxed);
-        neg2_log_likelihood(model, &base, theta, free, &spec_at(spec, clamp(x), which)).map_or(
+        let inside = clamp(x, &bounds);
+        neg2_log_likelihood(model, &base, theta, free, &spec_at(spec, inside, which)).map_or(
             f64::INFINITY,
             |v| {
-                // Outside the bounds: the clamped value plus a wall, so the search turns back.
                 v + 1e3
                     * x.iter()
-                        .zip(clamp(x))
+                        .zip(inside)
                         .map(|(a, b)| (a - b).abs())
                         .sum::<f64>()
             },
         )
     };
+    let side_by_side = fixes.len() <= SIDE_BY_SIDE_FIXES;
+    let f = |y: &[f64]| at(with(x0, &dims, y));
     let y0: Vec<f64> = dims.iter().map(|&d| x0[d]).collect();
     let f0 = f(&y0);
     if !f0.is_finite() {
         return None;
     }
-    let (best, value, sd) = if dims.is_empty() {
-        (y0, f0, Vec::new())
+    let (mut x, mut value) = if dims.is_empty() {
+        (x0, f0)
     } else {
-        let objective = Objective {
-            f: &f,
-            side_by_side: model.signals.fixes.len() <= SIDE_BY_SIDE_FIXES,
-        };
         // The jitter is pinned down by every pair of fixes (its range is a
         // few per cent), the others by the ride as a whole.
         let steps: Vec<f64> = dims
             .iter()
             .map(|&d| if d == 3 { 0.2 } else { 0.7 })
             .collect();
+        let objective = Objective {
+            f: &f,
+            side_by_side,
+        };
         let (best, value) = nelder_mead(objective, &y0, f0, &steps, NM_TOLERANCE, 120);
-        let sd = log_sd(objective, &best, value);
-        (best, value, sd)
+        (with(x0, &dims, &best), value)
     };
-    let evaluations = evaluations.into_inner();
-    let mut x = x0;
-    for (&d, &v) in dims.iter().zip(&best) {
-        x[d] = v;
-    }
-    let x = clamp(x);
-    let est = |d: usize| match dims.iter().position(|&e| e == d) {
-        Some(i) => {
-            let s = sd[i].min(5.0);
-            Estimated {
-                value: x[d].exp(),
-                low: (x[d] - s).exp(),
-                high: (x[d] + s).exp(),
-                estimated: true,
-            }
+    // A setting at an edge of the search is bounded from one side only.
+    let mut limit = [Limit::None; 4];
+    for &d in &dims {
+        let (lo, hi) = (bounds[d].0.ln(), bounds[d].1.ln());
+        if x[d] > hi - AT_EDGE {
+            (x[d], limit[d]) = (hi, Limit::AtLeast);
+        } else if x[d] < lo + AT_EDGE {
+            (x[d], limit[d]) = (lo, Limit::AtMost);
         }
-        // As set (0: independent fixes, no prior).
-        None => Estimated::held(
-            [
-                spec.sigma_horizontal_m,
-                spec.gps_tau_s.unwrap_or(0.0),
-                spec.bias_walk_dps_sqrt_s.unwrap_or(0.0),
-                spec.gps_white_m,
-            ][d],
-        ),
+    }
+    if limit.iter().any(|l| *l != Limit::None) {
+        value = at(x);
+    }
+    // The others' ranges from the curvature, with those held at the edge.
+    let inner: Vec<usize> = dims
+        .iter()
+        .copied()
+        .filter(|&d| limit[d] == Limit::None)
+        .collect();
+    let f_inner = |y: &[f64]| at(with(x, &inner, y));
+    let y_inner: Vec<f64> = inner.iter().map(|&d| x[d]).collect();
+    let sd = log_sd(
+        Objective {
+            f: &f_inner,
+            side_by_side,
+        },
+        &y_inner,
+        value,
+    );
+    // How far in from the edge the likelihood allows: along the ridge
+    // `sigma^2 / tau` for the correlation time (with sigma free), else alone.
+    let mut reach = [0.0; 4];
+    for &d in &dims {
+        let inward = match limit[d] {
+            Limit::None => continue,
+            Limit::AtLeast => -1.0,
+            Limit::AtMost => 1.0,
+        };
+        let mut dir = [0.0; 4];
+        dir[d] = inward;
+        if d == 1 && inner.contains(&0) {
+            dir[0] = 0.5 * inward;
+        }
+        let along = |t: &[f64]| at(std::array::from_fn(|k| x[k] + t[0] * dir[k]));
+        reach[d] = one_sided(
+            Objective {
+                f: &along,
+                side_by_side,
+            },
+            value,
+        );
+    }
+    let evaluations = evaluations.into_inner();
+    let est = |d: usize| {
+        if !dims.contains(&d) {
+            // As set (0: independent fixes, no prior).
+            return Estimated::held(
+                [
+                    spec.sigma_horizontal_m,
+                    spec.gps_tau_s.unwrap_or(0.0),
+                    spec.bias_walk_dps_sqrt_s.unwrap_or(0.0),
+                    spec.gps_white_m,
+                ][d],
+            );
+        }
+        let (lo, hi) = (bounds[d].0.ln(), bounds[d].1.ln());
+        let (low, high) = match limit[d] {
+            Limit::None => {
+                let s = inner
+                    .iter()
+                    .position(|&e| e == d)
+                    .map_or(f64::INFINITY, |i| sd[i])
+                    .min(5.0);
+                (x[d] - s, x[d] + s)
+            }
+            Limit::AtLeast => ((x[d] - reach[d]).max(lo), x[d]),
+            Limit::AtMost => (x[d], (x[d] + reach[d]).min(hi)),
+        };
+        Estimated {
+            value: x[d].exp(),
+            low: low.exp(),
+            high: high.exp(),
+            estimated: true,
+            limit: limit[d],
+        }
     };
     Some(NoiseEstimate {
         gps_sigma_m: est(0),
@@ -364,6 +477,41 @@ pub fn estimate(
         neg2_log_likelihood: value,
         evaluations,
     })
+}
+
+/// `x` with the coordinates `dims` replaced by `y`.
+fn with(x: [f64; 4], dims: &[usize], y: &[f64]) -> [f64; 4] {
+    let mut out = x;
+    for (&d, &v) in dims.iter().zip(y) {
+        out[d] = v;
+    }
+    out
+}
+
+/// A search that ends this close to a bound (in the logarithm) ended at it:
+/// closer than the curvature's step, whose points beyond the bound would
+/// meet the wall and read as a tight range (a 60 s drive came out
+/// "correlated over 1665 s (1624-1707)").
+const AT_EDGE: f64 = HESSIAN_STEP;
+
+/// Steps (in the logarithm) at which [`one_sided`] looks for the edge of the range.
+const ONE_SIDED_STEPS: [f64; 4] = [0.35, 0.7, 1.4, 2.8];
+
+/// How far `t >= 0` goes before `f(t)` rises by 1 above `f0 = f(0)` (the
+/// 1-sigma edge of `-2 ln L`), interpolated between [`ONE_SIDED_STEPS`];
+/// infinite if it does not rise that much within them.
+fn one_sided(f: Objective, f0: f64) -> f64 {
+    let points: Vec<Vec<f64>> = ONE_SIDED_STEPS.iter().map(|&t| vec![t]).collect();
+    let values = f.values(&points);
+    let (mut t_prev, mut rise_prev) = (0.0, 0.0);
+    for (&t, v) in ONE_SIDED_STEPS.iter().zip(values) {
+        let rise = v - f0;
+        if rise >= 1.0 {
+            return t_prev + (t - t_prev) * (1.0 - rise_prev) / (rise - rise_prev);
+        }
+        (t_prev, rise_prev) = (t, rise.max(rise_prev));
+    }
+    f64::INFINITY
 }
 
 /// Segment lengths (s) whose likelihood [`segment_preference`] compares.
@@ -431,8 +579,8 @@ impl Objective<'_> {
 }
 
 /// Nelder-Mead minimisation from `x0` (where `f` is `f0`) with initial steps
-/// `step` (per coordinate), until the simplex is smaller than `tol` in every coordinate or
-/// `max_eval` is spent. The path is the textbook one-at-a-time method's; what
+/// `step` (per coordinate), until the simplex is within `tol` or `max_eval`
+/// is spent. The path is the textbook one-at-a-time method's; what
 /// does not depend on an earlier value is evaluated side by side (the first
 /// simplex, the expansion with the reflection, a shrink), which on two cores
 /// takes a third off the search's time.
@@ -441,7 +589,7 @@ fn nelder_mead(
     x0: &[f64],
     f0: f64,
     step: &[f64],
-    tol: f64,
+    tol: Tolerance,
     max_eval: usize,
 ) -> (Vec<f64>, f64) {
     let n = x0.len();
@@ -471,7 +619,7 @@ fn nelder_mead(
                 hi - lo
             })
             .fold(0.0, f64::max);
-        if spread < tol {
+        if spread < tol.x || simplex[n].1 - simplex[0].1 < tol.f {
             break;
         }
         let centroid: Vec<f64> = (0..n)
@@ -610,7 +758,7 @@ mod tests {
                 &[0.0, 0.0],
                 f(&[0.0, 0.0]),
                 &[0.5, 0.5],
-                1e-6,
+                Tolerance { x: 1e-6, f: 0.0 },
                 500,
             );
             // Minimum of the quadratic: solve the 2x2 system.
