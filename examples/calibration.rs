@@ -21,8 +21,9 @@ fn main() -> anyhow::Result<()> {
     if seeds.is_empty() {
         seeds = vec![21, 22, 23, 24];
     }
-    let cases: [(&str, Option<Noise>); 4] = [
+    let cases: [(&str, Option<Noise>); 5] = [
         ("auto", None),
+        ("auto, bias walk too", Some((f64::NAN, None))),
         ("1.58 m, tau 60 s", Some((1.58, Some(60.0)))),
         ("1.58 m, independent", Some((1.58, None))),
         ("3 m, independent", Some((3.0, None))),
@@ -40,7 +41,9 @@ fn main() -> anyhow::Result<()> {
                 "cal",
             )?)?);
             let mut settings = FitSettings::default();
-            if let Some((sigma, tau)) = noise {
+            if noise.is_some_and(|(sigma, _)| sigma.is_nan()) {
+                settings.auto_noise.walk = true;
+            } else if let Some((sigma, tau)) = noise {
                 settings.auto_noise = AutoNoise::OFF;
                 settings.model.sigma_horizontal_m = sigma;
                 settings.model.gps_tau_s = tau;

@@ -8,7 +8,7 @@ use std::sync::Arc;
 use gyropath::effects::DEG_PER_RAD;
 use gyropath::geodesy::Geodetic;
 use gyropath::import::load_file;
-use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::optimisation::{FitSettings, Limit, Reconstruction};
 use gyropath::signals::Signals;
 use nalgebra::Vector3;
 
@@ -73,6 +73,14 @@ fn paper_model_recovers_the_yaw_bias_and_beats_the_raw_fixes() {
         "fixes {fixes} m from the reference"
     );
     assert!(at_fixes < fixes, "path {at_fixes} m vs fixes {fixes} m");
+    // A minute cannot tell a GPS error correlated over minutes from one
+    // correlated over hours: the correlation time is a lower bound, never
+    // a number longer than the drive with a tight range.
+    let noise = fit.noise().expect("noise estimated");
+    eprintln!("{}", noise.describe());
+    let tau = noise.gps_tau_s;
+    assert!(tau.value <= 61.0, "{tau:?}");
+    assert!(tau.limit == Limit::AtLeast || tau.high <= 61.0, "{tau:?}");
     assert!(everywhere < fixes, "path {everywhere} m vs fixes {fixes} m");
 
     // The fixes are stamped on arrival, about 0.08 s after the reference

@@ -32,7 +32,7 @@ use crate::signals::Signals;
 
 pub use gd::GdState;
 pub use lm::{LmState, StepOutcome};
-pub use noise::{AutoNoise, Estimated, NoiseEstimate};
+pub use noise::{AutoNoise, Estimated, Limit, NoiseEstimate};
 
 /// Why a fit could not be set up.
 #[derive(Debug, Error)]

@@ -773,6 +773,50 @@ mod tests {
     }
 
     #[test]
+    fn one_sided_reach_is_where_the_likelihood_rises_by_one() {
+        // -2 ln L rising as (t / 0.5)^2: 1 at t = 0.5, found between steps to within 10 %.
+        let rising = |t: &[f64]| 7.0 + (t[0] / 0.5).powi(2);
+        let reach = one_sided(
+            Objective {
+                f: &rising,
+                side_by_side: false,
+            },
+            7.0,
+        );
+        assert!((reach - 0.5).abs() < 0.05, "{reach}");
+        // Flat: no edge within the steps.
+        let flat = |t: &[f64]| 7.0 + 0.01 * t[0];
+        let reach = one_sided(
+            Objective {
+                f: &flat,
+                side_by_side: true,
+            },
+            7.0,
+        );
+        assert!(reach.is_infinite(), "{reach}");
+    }
+
+    #[test]
+    fn a_setting_at_the_edge_is_described_from_one_side() {
+        let tau = Estimated {
+            value: 59.0,
+            low: 25.0,
+            high: 59.0,
+            estimated: true,
+            limit: Limit::AtLeast,
+        };
+        assert_eq!(tau.describe("s", 0), "at least 25 s");
+        let jitter = Estimated {
+            value: 0.01,
+            low: 0.01,
+            high: 0.03,
+            estimated: true,
+            limit: Limit::AtMost,
+        };
+        assert_eq!(jitter.describe("m", 2), "at most 0.03 m");
+    }
+
+    #[test]
     fn log_sd_inverts_the_curvature() {
         // f = -2 ln L of a Gaussian in x with sd 0.3: f = (x / 0.3)^2.
         let f = |x: &[f64]| (x[0] / 0.3).powi(2) + (x[1] / 0.1).powi(2);
