@@ -2,7 +2,7 @@
 //! size and the bias smoothness prior, all live; and what the view shows.
 
 use crate::model::DEFAULT_BIAS_WALK;
-use crate::optimisation::Method;
+use crate::optimisation::{Limit, Method};
 
 use super::GyropathApp;
 
@@ -125,7 +125,14 @@ impl GyropathApp {
                     ui.label(n.gps_sigma_m.describe("m", 2));
                     ui.end_row();
                     ui.label("GPS error");
-                    ui.label(n.tau_text());
+                    let tau = ui.label(n.tau_text());
+                    if n.gps_tau_s.limit == Limit::AtLeast {
+                        tau.on_hover_text(
+                            "The likelihood keeps rising towards the ride's length: a wander \
+                             that slow is an offset plus a drift over the ride, and only the \
+                             drift (sigma^2 / tau) shows. The value is a lower bound.",
+                        );
+                    }
                     ui.end_row();
                     ui.label("GPS jitter");
                     ui.label(n.gps_white_m.describe("m", 2));

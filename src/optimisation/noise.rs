@@ -164,7 +164,7 @@ impl NoiseEstimate {
     pub fn tau_text(&self) -> String {
         if self.gps_tau_s.limit == Limit::AtLeast {
             format!(
-                "correlated over {}: longer than this ride can tell apart (only the drift sigma^2 / tau shows)",
+                "correlated over {} (more than the ride can tell)",
                 self.gps_tau_s.describe("s", 0)
             )
         } else if self.gps_tau_s.value > 0.0 {
