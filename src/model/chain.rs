@@ -1196,22 +1196,22 @@ impl ChainSystem {
                 r[c] += back;
             }
             r[n] = -lin.r[o];
+            if let Some((_, w)) = &wander {
+                wander_at[o] = ops.len();
+                constraint_log_det += 2.0 * w.ln();
+            }
             match (prev_col, wander) {
                 // The common case, in place: the previous wander's column
                 // becomes this one's (see `Work::pass_wander`).
-                (Some(p), Some((mut c, w))) if work.rows.nrows() > p => {
+                (Some(p), Some((mut c, _))) if work.rows.nrows() > p => {
                     c.swap(0, p + 1);
-                    wander_at[o] = ops.len();
                     ops.push(work.pass_wander(p, o, r, c));
-                    constraint_log_det += 2.0 * w.ln();
                 }
                 (_, wander) => {
                     work.pending.push(r);
-                    if let Some((c, w)) = wander {
-                        wander_at[o] = ops.len();
+                    if let Some((c, _)) = wander {
                         work.open_wander(o);
                         work.pending.push(c);
-                        constraint_log_det += 2.0 * w.ln();
                     }
                     // The previous wander: nothing ahead depends on it any more.
                     if let Some(j) = link.prev
