@@ -122,6 +122,62 @@ impl LocalFrame {
     }
 }
 
+/// Web Mercator (EPSG:3857) tile coordinates, as slippy-map tile servers
+/// (OpenStreetMap and the like) number their square tiles: at zoom `z` the
+/// world is `2^z` tiles across, and a point's fractional tile position is
+/// `x = 2^z (lon + 180) / 360`, `y = 2^z (1 - ln(tan lat + sec lat) / pi) / 2`
+/// (y grows southward). The tile holding the point is `(floor x, floor y)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TilePosition {
+    pub x: f64,
+    pub y: f64,
+    pub zoom: u8,
+}
+
+/// Web Mercator's latitude limit (deg): the square world's edge, `atan(sinh pi)`.
+pub const MERCATOR_MAX_LAT_DEG: f64 = 85.051_128_779_806_59;
+
+impl TilePosition {
+    /// The fractional tile position of `g` (latitude clamped to Mercator's square).
+    pub fn of(g: &Geodetic, zoom: u8) -> Self {
+        let n = f64::from(1u32 << zoom.min(30));
+        let lat = g
+            .lat_deg
+            .clamp(-MERCATOR_MAX_LAT_DEG, MERCATOR_MAX_LAT_DEG)
+            .to_radians();
+        Self {
+            x: n * (g.lon_deg + 180.0) / 360.0,
+            y: n * (1.0 - (lat.tan() + 1.0 / lat.cos()).ln() / std::f64::consts::PI) / 2.0,
+            zoom,
+        }
+    }
+
+    /// The point at this tile position (height 0): `lon = 360 x / 2^z - 180`,
+    /// `lat = atan(sinh(pi (1 - 2 y / 2^z)))`.
+    pub fn geodetic(&self) -> Geodetic {
+        let n = f64::from(1u32 << self.zoom.min(30));
+        let lat = (std::f64::consts::PI * (1.0 - 2.0 * self.y / n))
+            .sinh()
+            .atan();
+        Geodetic::new(lat.to_degrees(), 360.0 * self.x / n - 180.0, 0.0)
+    }
+}
+
+/// The zoom at which one pixel of a `tile_px`-pixel tile covers about
+/// `metres_per_pixel` of ground at latitude `lat_deg` (a tile pixel spans
+/// `2 pi a cos(lat) / (tile_px 2^z)` metres), clamped to `0..=max_zoom`.
+pub fn tile_zoom_for(metres_per_pixel: f64, lat_deg: f64, tile_px: f64, max_zoom: u8) -> u8 {
+    let equator = 2.0 * std::f64::consts::PI * WGS84_A / tile_px;
+    let z = (equator * lat_deg.to_radians().cos() / metres_per_pixel).log2();
+    if z.is_finite() {
+        z.round().clamp(0.0, f64::from(max_zoom)) as u8
+    } else if metres_per_pixel > 0.0 {
+        0
+    } else {
+        max_zoom
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -169,5 +225,38 @@ mod tests {
         assert!((up - Vector3::new(0.0, 0.0, 10.0)).norm() < 1e-6);
         let p = Vector3::new(1234.5, -987.6, 12.3);
         assert!((frame.to_enu(&frame.to_geodetic(&p)) - p).norm() < 1e-5);
+    }
+
+    #[test]
+    fn tile_positions_match_the_slippy_map_convention() {
+        // Zoom 0 is one tile: its corners are the Mercator square's.
+        let nw = TilePosition::of(&Geodetic::new(MERCATOR_MAX_LAT_DEG, -180.0, 0.0), 0);
+        assert!(nw.x.abs() < 1e-12 && nw.y.abs() < 1e-9, "{nw:?}");
+        let centre = TilePosition::of(&Geodetic::new(0.0, 0.0, 0.0), 3);
+        assert!((centre.x - 4.0).abs() < 1e-12 && (centre.y - 4.0).abs() < 1e-12);
+        // An exact tile edge: sinh(pi/2) is a quarter of the way down, at
+        // latitude atan(sinh(pi/2)) = 66.513 deg; a tile is 360/2^z deg wide.
+        let quarter = (std::f64::consts::FRAC_PI_2.sinh().atan()).to_degrees();
+        let edge = TilePosition::of(&Geodetic::new(quarter, 19.0, 0.0), 16);
+        assert!((edge.y - 16384.0).abs() < 1e-6, "{edge:?}");
+        assert!((edge.x - (19.0 + 180.0) / (360.0 / 65536.0)).abs() < 1e-9);
+        // And back: a tile corner round-trips to well below a millimetre.
+        for &(lat, lon) in &[(47.49895, 19.04357), (-33.9, 151.2), (37.72, -122.47)] {
+            let g = Geodetic::new(lat, lon, 0.0);
+            let back = TilePosition::of(&g, 17).geodetic();
+            assert!((back.lat_deg - lat).abs() < 1e-9 && (back.lon_deg - lon).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn tile_zoom_puts_a_tile_pixel_near_a_screen_pixel() {
+        // At the equator zoom 0 is 156 km per pixel of a 256-pixel tile.
+        assert_eq!(tile_zoom_for(156_543.0, 0.0, 256.0, 19), 0);
+        // 1.08 m per pixel at 47.5 deg: log2(156543 cos(47.5 deg) / 1.08) = 16.58.
+        let z = tile_zoom_for(1.08, 47.5, 256.0, 19);
+        assert_eq!(z, 17, "zoom {z}");
+        assert_eq!(tile_zoom_for(1e-3, 47.5, 256.0, 19), 19);
+        assert_eq!(tile_zoom_for(f64::INFINITY, 47.5, 256.0, 19), 0);
+        assert_eq!(tile_zoom_for(0.0, 47.5, 256.0, 19), 19);
     }
 }

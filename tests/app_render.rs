@@ -5,6 +5,7 @@
 use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
+use gyropath::app::map_tiles::{MapBackground, Status, TileServer as MapServer};
 use gyropath::app::{AppSettings, GyropathApp, sample_ride};
 
 /// Pixels that differ between two renders of the same size, counted in the
@@ -74,4 +75,195 @@ fn the_sigma_band_and_ellipses_are_drawn() {
     eprintln!("pixels changed: map {map}, bias plot {plots}");
     assert!(map > 1000, "ellipses: {map} pixels changed");
     assert!(plots > 1000, "bias band: {plots} pixels changed");
+}
+
+/// A tile server on a free local port: every request gets one magenta
+/// 256-pixel PNG tile, cacheable for a day, and is recorded (path and
+/// User-Agent). Tests never reach the network.
+struct TileServer {
+    url: String,
+    requests: std::sync::Arc<std::sync::Mutex<Vec<(String, String)>>>,
+}
+
+impl TileServer {
+    fn start() -> Self {
+        use std::io::{Read, Write};
+        let listener = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+        let port = listener.local_addr().expect("addr").port();
+        let mut png = Vec::new();
+        image::RgbaImage::from_pixel(256, 256, image::Rgba([255, 0, 255, 255]))
+            .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+            .expect("png");
+        let requests = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let log = requests.clone();
+        std::thread::spawn(move || {
+            for stream in listener.incoming().flatten() {
+                let (png, log) = (png.clone(), log.clone());
+                std::thread::spawn(move || {
+                    let mut stream = stream;
+                    let mut head = Vec::new();
+                    let mut byte = [0u8; 1];
+                    while !head.ends_with(b"\r\n\r\n") && stream.read(&mut byte).unwrap_or(0) == 1 {
+                        head.push(byte[0]);
+                    }
+                    let head = String::from_utf8_lossy(&head).to_string();
+                    let path = head.split_whitespace().nth(1).unwrap_or("").to_string();
+                    let agent = head
+                        .lines()
+                        .find_map(|l| {
+                            l.strip_prefix("user-agent: ")
+                                .or(l.strip_prefix("User-Agent: "))
+                        })
+                        .unwrap_or("")
+                        .to_string();
+                    log.lock().expect("log").push((path, agent));
+                    let header = format!(
+                        "HTTP/1.1 200 OK\r\nContent-Type: image/png\r\nContent-Length: {}\r\n\
+                         Cache-Control: public, max-age=86400\r\nConnection: close\r\n\r\n",
+                        png.len()
+                    );
+                    let _ = stream.write_all(header.as_bytes());
+                    let _ = stream.write_all(&png);
+                });
+            }
+        });
+        Self {
+            url: format!("http://127.0.0.1:{port}/{{z}}/{{x}}/{{y}}.png"),
+            requests,
+        }
+    }
+
+    fn requests(&self) -> Vec<(String, String)> {
+        self.requests.lock().expect("log").clone()
+    }
+}
+
+/// The sample ride's app with a tile background from `server`, cached in `cache`.
+fn app_with_tiles(url: &str, cache: &std::path::Path) -> Harness<'static, GyropathApp> {
+    let settings = AppSettings {
+        auto_run: false,
+        ..AppSettings::default()
+    };
+    let mut app = GyropathApp::new(settings, sample_ride(), || {});
+    app.map_background = Some(MapBackground::new(MapServer {
+        url: url.to_string(),
+        cache: Some(cache.to_path_buf()),
+    }));
+    Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .wgpu()
+        .build_ui_state(|ui, app: &mut GyropathApp| app.ui(ui), app)
+}
+
+/// Step until the map background's status is `want`.
+fn step_until_tiles(h: &mut Harness<'static, GyropathApp>, want: Status) {
+    let start = Instant::now();
+    loop {
+        h.step();
+        let status = h.state().map_background.as_ref().map(|b| b.status());
+        if h.state().ride.is_some() && status == Some(want) {
+            break;
+        }
+        assert!(
+            start.elapsed() < Duration::from_secs(60),
+            "map tiles: {status:?}, waited for {want:?}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run();
+}
+
+/// Map pixels (the middle column above the model history) that are the tile's
+/// magenta, dimmed by the map's tint: red and blue alike and well above green.
+fn magenta_pixels(img: &image::RgbaImage) -> usize {
+    let (w, h) = (f64::from(img.width()), f64::from(img.height()));
+    img.enumerate_pixels()
+        .filter(|(x, y, _)| {
+            (0.29..0.63).contains(&(f64::from(*x) / w))
+                && (0.05..0.75).contains(&(f64::from(*y) / h))
+        })
+        .filter(|(_, _, p)| {
+            let [r, g, b, _] = p.0;
+            r > 60 && (i16::from(r) - i16::from(b)).abs() < 12 && i16::from(r) - i16::from(g) > 50
+        })
+        .count()
+}
+
+#[test]
+fn map_tiles_are_fetched_drawn_under_the_ride_and_cached_on_disk() {
+    let server = TileServer::start();
+    let cache = tempfile::tempdir().expect("tempdir");
+    let mut h = app_with_tiles(&server.url, cache.path());
+    step_until_tiles(&mut h, Status::Shown);
+    // Let the rest of the view's tiles arrive.
+    for _ in 0..50 {
+        h.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run();
+    let img = h.render().expect("render");
+    img.save(std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("app_with_tiles.png"))
+        .expect("save");
+    let map_px = 0.34 * 1280.0 * 0.70 * 800.0;
+    let magenta = magenta_pixels(&img);
+    eprintln!("magenta map pixels: {magenta} of {map_px:.0}");
+    assert!(
+        magenta as f64 > 0.3 * map_px,
+        "tiles cover {magenta} pixels"
+    );
+    // Requests are slippy-map tiles at a street-level zoom, and say who asks.
+    let requests = server.requests();
+    assert!(!requests.is_empty());
+    for (path, agent) in &requests {
+        let parts: Vec<u32> = path
+            .trim_start_matches('/')
+            .trim_end_matches(".png")
+            .split('/')
+            .map(|p| p.parse().expect("number"))
+            .collect();
+        assert_eq!(parts.len(), 3, "{path}");
+        assert!((10..=19).contains(&parts[0]), "zoom of {path}");
+        assert!(agent.starts_with("gyropath/"), "user agent {agent:?}");
+    }
+    // The tiles were written to the disk cache: a new app on the same cache
+    // draws them without asking the server again.
+    assert!(
+        std::fs::read_dir(cache.path())
+            .expect("cache")
+            .next()
+            .is_some()
+    );
+    let asked = requests.len();
+    drop(h);
+    let mut again = app_with_tiles(&server.url, cache.path());
+    step_until_tiles(&mut again, Status::Shown);
+    for _ in 0..20 {
+        again.step();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let after = server.requests().len();
+    assert!(
+        after <= asked,
+        "{asked} requests, then {after} more with a warm cache"
+    );
+}
+
+#[test]
+fn without_a_tile_server_the_map_quietly_goes_without() {
+    // A port nobody listens on: every fetch fails, as offline.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind")
+        .local_addr()
+        .expect("addr")
+        .port();
+    let cache = tempfile::tempdir().expect("tempdir");
+    let url = format!("http://127.0.0.1:{port}/{{z}}/{{x}}/{{y}}.png");
+    let mut h = app_with_tiles(&url, cache.path());
+    step_until_tiles(&mut h, Status::Unavailable);
+    let img = h.render().expect("render");
+    // (A few antialiased pixels of the path's colours may pass for magenta.)
+    let magenta = magenta_pixels(&img);
+    assert!(magenta < 200, "{magenta} magenta pixels with no tiles");
+    // The map itself is still there: the fixes' points are drawn.
+    assert!(h.state().ride.as_ref().is_some_and(|r| !r.fixes.is_empty()));
 }

@@ -16,6 +16,7 @@ mod effects_panel;
 pub mod examples;
 mod fit_panel;
 mod history_panel;
+pub mod map_tiles;
 mod menu;
 pub mod plots;
 mod settings_panel;
@@ -55,6 +56,8 @@ pub struct AppSettings {
     pub normalised_residuals: bool,
     /// Start fitting as soon as a ride is loaded.
     pub auto_run: bool,
+    /// Draw map tiles under the map (when the app has a tile server).
+    pub map_tiles: bool,
 }
 
 impl Default for AppSettings {
@@ -65,6 +68,7 @@ impl Default for AppSettings {
             colour_by_residual: false,
             normalised_residuals: false,
             auto_run: true,
+            map_tiles: true,
         }
     }
 }
@@ -128,6 +132,9 @@ pub struct GyropathApp {
     run_on_load: bool,
     /// Frame-time statistics on stderr (`GYROPATH_FRAME_LOG=1`), for measuring.
     frame_log: Option<FrameLog>,
+    /// The map's tile background; `None` (the default, and in tests) never
+    /// touches the network. [`run`] sets OpenStreetMap's.
+    pub map_background: Option<map_tiles::MapBackground>,
 }
 
 /// Frame times of the UI (eframe's CPU time per frame, without the GPU).
@@ -198,6 +205,7 @@ impl GyropathApp {
             picked_tx,
             picked_rx,
             frame_log: std::env::var_os("GYROPATH_FRAME_LOG").map(|_| FrameLog::default()),
+            map_background: None,
         };
         app.apply(Command::Open(ride));
         app
@@ -497,9 +505,11 @@ pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Res
                 .unwrap_or_default();
             let ctx = cc.egui_ctx.clone();
             let source = ride.map_or_else(sample_ride, |(p, o)| RideSource::Path(p, Box::new(o)));
-            Ok(Box::new(GyropathApp::new(settings, source, move || {
-                ctx.request_repaint()
-            })))
+            let mut app = GyropathApp::new(settings, source, move || ctx.request_repaint());
+            app.map_background = Some(map_tiles::MapBackground::new(
+                map_tiles::TileServer::from_env(),
+            ));
+            Ok(Box::new(app))
         }),
     )
 }

@@ -11,6 +11,7 @@ use egui_plot::{
     VLine,
 };
 
+use super::map_tiles::{MapBackground, attribution_ui};
 use super::worker::{RideView, SigmaView, Snapshot};
 use crate::diagnosis::FixResidual;
 use crate::optimisation::IterationReport;
@@ -164,6 +165,7 @@ pub fn map_ui(
     snap: Option<&Snapshot>,
     colour_by_residual: bool,
     hover_t: Option<f64>,
+    mut background: Option<&mut MapBackground>,
 ) {
     let shown = Plot::new("map")
         .data_aspect(1.0)
@@ -175,6 +177,10 @@ pub fn map_ui(
         .x_axis_label("east (m)")
         .y_axis_label("north (m)")
         .show(ui, |plot| {
+            if let Some(bg) = background.as_deref_mut() {
+                let layer = bg.layer(plot.ctx(), plot.transform(), &ride.frame);
+                plot.add(layer);
+            }
             let fixes = thin_to_pixels(plot, ride.fixes.iter().map(|f| [f[1], f[2]]));
             plot.points(
                 Points::new("GPS fixes", fixes)
@@ -239,6 +245,9 @@ pub fn map_ui(
             }
         });
     scale_bar_ui(ui, &shown.transform);
+    if let Some(bg) = background {
+        attribution_ui(ui, &shown.transform, bg.status());
+    }
 }
 
 /// A scale bar's length for a map `width` metres wide (a 1-2-5 step of a
@@ -504,6 +513,9 @@ impl super::GyropathApp {
                     snap,
                     self.settings.colour_by_residual,
                     self.hover_t,
+                    self.map_background
+                        .as_mut()
+                        .filter(|_| self.settings.map_tiles),
                 );
             });
             ui.vertical(|ui| {

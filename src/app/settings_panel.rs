@@ -152,6 +152,13 @@ impl GyropathApp {
             &mut self.settings.colour_by_residual,
             "colour path by residual",
         );
+        if self.map_background.is_some() {
+            ui.checkbox(&mut self.settings.map_tiles, "map background")
+                .on_hover_text(
+                    "OpenStreetMap tiles under the map, fetched when online and \
+                     cached on disk; without a network the map is drawn without them",
+                );
+        }
         ui.checkbox(
             &mut self.settings.normalised_residuals,
             "residuals in sigmas of the noise model",

@@ -91,6 +91,8 @@ pub struct RideView {
     pub origin: Origin,
     /// The attitude model and why.
     pub attitude: crate::signals::Attitude,
+    /// The local frame the fixes are in (for the map's tiles).
+    pub frame: crate::geodesy::LocalFrame,
 }
 
 /// Where a ride came from: its kind, the topics read (bags), the mounting
@@ -555,6 +557,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         warnings: sig.warnings.clone(),
         origin,
         attitude: sig.attitude.clone(),
+        frame: sig.frame.clone(),
     }
 }
 
