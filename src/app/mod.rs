@@ -9,7 +9,7 @@
 //! This file holds the state and the Command loop; each panel is a file of
 //! its own (`impl GyropathApp` blocks): `menu`, `source`, `fit_panel`,
 //! `settings_panel`, `effects_panel`, `plots`, `history_panel`,
-//! `diagnosis_panel`, `examples`.
+//! `diagnosis_panel`, `examples`; `map_tiles` draws the map's background.
 
 mod diagnosis_panel;
 mod effects_panel;
