@@ -165,17 +165,13 @@ impl TilePosition {
 
 /// The zoom at which one pixel of a `tile_px`-pixel tile covers about
 /// `metres_per_pixel` of ground at latitude `lat_deg` (a tile pixel spans
-/// `2 pi a cos(lat) / (tile_px 2^z)` metres), clamped to `0..=max_zoom`.
+/// `2 pi a cos(lat) / (tile_px 2^z)` metres), clamped to `0..=max_zoom`
+/// (an infinitely wide pixel takes zoom 0, an empty one `max_zoom`).
 pub fn tile_zoom_for(metres_per_pixel: f64, lat_deg: f64, tile_px: f64, max_zoom: u8) -> u8 {
     let equator = 2.0 * std::f64::consts::PI * WGS84_A / tile_px;
     let z = (equator * lat_deg.to_radians().cos() / metres_per_pixel).log2();
-    if z.is_finite() {
-        z.round().clamp(0.0, f64::from(max_zoom)) as u8
-    } else if metres_per_pixel > 0.0 {
-        0
-    } else {
-        max_zoom
-    }
+    // A NaN casts to 0; infinities clamp to the ends.
+    z.round().clamp(0.0, f64::from(max_zoom)) as u8
 }
 
 #[cfg(test)]

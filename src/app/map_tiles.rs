@@ -115,10 +115,6 @@ impl MapBackground {
         }
     }
 
-    pub fn server(&self) -> &TileServer {
-        &self.server
-    }
-
     pub fn status(&self) -> Status {
         self.status
     }
@@ -292,17 +288,6 @@ pub struct TileLayer {
     base: PlotItemBase,
     quads: Vec<Quad>,
     tint: Color32,
-}
-
-impl TileLayer {
-    /// How many tiles it draws.
-    pub fn len(&self) -> usize {
-        self.quads.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.quads.is_empty()
-    }
 }
 
 impl PlotItem for TileLayer {
