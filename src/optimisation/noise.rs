@@ -33,7 +33,7 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::model::{ChainSystem, Model, ModelSpec};
@@ -209,31 +209,26 @@ fn no_jitter() -> Estimated {
     Estimated::held(0.0)
 }
 
+/// The settings searched: GPS sigma, correlation time, bias walk, jitter.
+const SETTINGS: usize = 4;
+
 /// Bounds of the search (natural units): sigma (m), tau (s), walk
-/// (deg/s/sqrt(s)), jitter (m; at the floor the fixes have none to speak of).
-const BOUNDS: [(f64, f64); 4] = [(0.05, 100.0), (0.3, 1800.0), (1e-5, 0.5), (0.01, 100.0)];
+/// (deg/s/sqrt(s)), jitter (m; at the floor the fixes have none to speak
+/// of).
+const BOUNDS: [(f64, f64); SETTINGS] = [(0.05, 100.0), (0.3, 1800.0), (1e-5, 0.5), (0.01, 100.0)];
 
-/// The search stops when the simplex is this small in every log-setting (a
-/// quarter of a typical 1-sigma range: 0.02 took 139 likelihoods on a
-/// 30-minute ride instead of 75, to move the settings well inside their
-/// ranges), or when its corners' `-2 ln L` are this close (all within half a
-/// sigma of each other: along a ridge, such as `sigma^2 / tau` when tau nears
-/// the ride's length, the simplex otherwise crawls on with nothing to gain).
-const NM_TOLERANCE: Tolerance = Tolerance { x: 0.05, f: 0.2 };
+/// Newton iterations at most (a start from the misfits' moments typically
+/// takes three or four).
+const MAX_NEWTON_ITERATIONS: usize = 8;
 
-/// When [`nelder_mead`] stops: the simplex's size in every coordinate, or the
-/// spread of its values.
-#[derive(Clone, Copy, Debug)]
-struct Tolerance {
-    x: f64,
-    f: f64,
-}
+/// Step of the finite-difference stencil (in the logarithm of a setting).
+const HESSIAN_STEP: f64 = 0.15;
 
 /// Correlation time the search starts from when none is set (s).
 const START_TAU_S: f64 = 20.0;
 
 /// The settings of `spec` as a point in log space.
-fn point(spec: &ModelSpec) -> [f64; 4] {
+fn point(spec: &ModelSpec) -> [f64; SETTINGS] {
     [
         spec.sigma_horizontal_m.ln(),
         spec.gps_tau_s
@@ -252,13 +247,13 @@ fn point(spec: &ModelSpec) -> [f64; 4] {
 /// that slow is an offset plus a drift over the ride, and only the drift
 /// `sigma^2 / tau` shows), so the search stops at the ride's length and says
 /// the time is at least that long.
-fn bounds_for(span: f64) -> [(f64, f64); 4] {
+fn bounds_for(span: f64) -> [(f64, f64); SETTINGS] {
     let mut b = BOUNDS;
     b[1].1 = span.clamp(10.0 * b[1].0, b[1].1);
     b
 }
 
-fn clamp(x: [f64; 4], bounds: &[(f64, f64); 4]) -> [f64; 4] {
+fn clamp(x: [f64; SETTINGS], bounds: &[(f64, f64); SETTINGS]) -> [f64; SETTINGS] {
     let mut y = x;
     for (v, (lo, hi)) in y.iter_mut().zip(bounds) {
         *v = v.clamp(lo.ln(), hi.ln());
@@ -269,7 +264,7 @@ fn clamp(x: [f64; 4], bounds: &[(f64, f64); 4]) -> [f64; 4] {
 /// `spec` with the settings `which` covers taken from the log-space point
 /// `x` (sigma, tau, walk, jitter); the others stay as set (independent fixes, no
 /// prior), so the likelihood is that of the model the fit will run.
-fn spec_at(spec: &ModelSpec, x: [f64; 4], which: AutoNoise) -> ModelSpec {
+fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec {
     let mut out = spec.clone();
     if which.gps {
         let ratio = spec.sigma_vertical_m / spec.sigma_horizontal_m;
@@ -346,7 +341,7 @@ pub fn estimate(
     let evaluations = AtomicUsize::new(0);
     // -2 ln L at a log-space point; outside the bounds the clamped value
     // plus a wall, so that a search turns back.
-    let at = |x: [f64; 4]| -> f64 {
+    let at = |x: [f64; SETTINGS]| -> f64 {
         evaluations.fetch_add(1, Ordering::Relaxed);
         let inside = clamp(x, &bounds);
         neg2_log_likelihood(model, &base, theta, free, &spec_at(spec, inside, which)).map_or(
@@ -367,61 +362,43 @@ pub fn estimate(
     if !f0.is_finite() {
         return None;
     }
-    let (mut x, mut value) = if dims.is_empty() {
-        (x0, f0)
-    } else {
-        // The jitter is pinned down by every pair of fixes (its range is a
-        // few per cent), the others by the ride as a whole.
-        let steps: Vec<f64> = dims
-            .iter()
-            .map(|&d| if d == 3 { 0.2 } else { 0.7 })
-            .collect();
-        let objective = Objective {
+    let log_bounds: Vec<(f64, f64)> = dims
+        .iter()
+        .map(|&d| (bounds[d].0.ln(), bounds[d].1.ln()))
+        .collect();
+    let found = newton(
+        Objective {
             f: &f,
             side_by_side,
-        };
-        let (best, value) = nelder_mead(objective, &y0, f0, &steps, NM_TOLERANCE, 120);
-        (with(x0, &dims, &best), value)
-    };
-    // A setting at an edge of the search is bounded from one side only.
-    let mut limit = [Limit::None; 4];
-    for &d in &dims {
-        let (lo, hi) = (bounds[d].0.ln(), bounds[d].1.ln());
-        if x[d] > hi - AT_EDGE {
-            (x[d], limit[d]) = (hi, Limit::AtLeast);
-        } else if x[d] < lo + AT_EDGE {
-            (x[d], limit[d]) = (lo, Limit::AtMost);
-        }
+        },
+        &y0,
+        f0,
+        &log_bounds,
+        MAX_NEWTON_ITERATIONS,
+    );
+    let x = with(x0, &dims, &found.x);
+    let value = found.value;
+    let mut limit = [Limit::None; SETTINGS];
+    let mut sd = [f64::INFINITY; SETTINGS];
+    for (i, &d) in dims.iter().enumerate() {
+        limit[d] = found.limit[i];
+        sd[d] = found.sd[i];
     }
-    if limit.iter().any(|l| *l != Limit::None) {
-        value = at(x);
-    }
-    // The others' ranges from the curvature, with those held at the edge.
     let inner: Vec<usize> = dims
         .iter()
         .copied()
         .filter(|&d| limit[d] == Limit::None)
         .collect();
-    let f_inner = |y: &[f64]| at(with(x, &inner, y));
-    let y_inner: Vec<f64> = inner.iter().map(|&d| x[d]).collect();
-    let sd = log_sd(
-        Objective {
-            f: &f_inner,
-            side_by_side,
-        },
-        &y_inner,
-        value,
-    );
     // How far in from the edge the likelihood allows: along the ridge
     // `sigma^2 / tau` for the correlation time (with sigma free), else alone.
-    let mut reach = [0.0; 4];
+    let mut reach = [0.0; SETTINGS];
     for &d in &dims {
         let inward = match limit[d] {
             Limit::None => continue,
             Limit::AtLeast => -1.0,
             Limit::AtMost => 1.0,
         };
-        let mut dir = [0.0; 4];
+        let mut dir = [0.0; SETTINGS];
         dir[d] = inward;
         if d == 1 && inner.contains(&0) {
             dir[0] = 0.5 * inward;
@@ -451,11 +428,7 @@ pub fn estimate(
         let (lo, hi) = (bounds[d].0.ln(), bounds[d].1.ln());
         let (low, high) = match limit[d] {
             Limit::None => {
-                let s = inner
-                    .iter()
-                    .position(|&e| e == d)
-                    .map_or(f64::INFINITY, |i| sd[i])
-                    .min(5.0);
+                let s = sd[d].min(5.0);
                 (x[d] - s, x[d] + s)
             }
             Limit::AtLeast => ((x[d] - reach[d]).max(lo), x[d]),
@@ -480,19 +453,13 @@ pub fn estimate(
 }
 
 /// `x` with the coordinates `dims` replaced by `y`.
-fn with(x: [f64; 4], dims: &[usize], y: &[f64]) -> [f64; 4] {
+fn with(x: [f64; SETTINGS], dims: &[usize], y: &[f64]) -> [f64; SETTINGS] {
     let mut out = x;
     for (&d, &v) in dims.iter().zip(y) {
         out[d] = v;
     }
     out
 }
-
-/// A search that ends this close to a bound (in the logarithm) ended at it:
-/// closer than the curvature's step, whose points beyond the bound would
-/// meet the wall and read as a tight range (a 60 s drive came out
-/// "correlated over 1665 s (1624-1707)").
-const AT_EDGE: f64 = HESSIAN_STEP;
 
 /// Steps (in the logarithm) at which [`one_sided`] looks for the edge of the range.
 const ONE_SIDED_STEPS: [f64; 4] = [0.35, 0.7, 1.4, 2.8];
@@ -578,148 +545,176 @@ impl Objective<'_> {
     }
 }
 
-/// Nelder-Mead minimisation from `x0` (where `f` is `f0`) with initial steps
-/// `step` (per coordinate), until the simplex is within `tol` or `max_eval`
-/// is spent. The path is the textbook one-at-a-time method's; what
-/// does not depend on an earlier value is evaluated side by side (the first
-/// simplex, the expansion with the reflection, a shrink), which on two cores
-/// takes a third off the search's time.
-fn nelder_mead(
-    f: Objective,
-    x0: &[f64],
-    f0: f64,
-    step: &[f64],
-    tol: Tolerance,
-    max_eval: usize,
-) -> (Vec<f64>, f64) {
-    let n = x0.len();
-    let moved: Vec<Vec<f64>> = (0..n)
-        .map(|i| {
-            let mut x = x0.to_vec();
-            x[i] += step[i];
-            x
-        })
-        .collect();
-    let mut simplex: Vec<(Vec<f64>, f64)> = std::iter::once((x0.to_vec(), f0))
-        .chain(moved.iter().cloned().zip(f.values(&moved)))
-        .collect();
-    let mut evals = n + 1;
-    let point = |c: &[f64], d: &[f64], t: f64| -> Vec<f64> {
-        c.iter().zip(d).map(|(a, b)| a + t * (b - a)).collect()
-    };
-    while evals < max_eval {
-        simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let spread = (0..n)
-            .map(|d| {
-                let (lo, hi) = simplex
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), s| {
-                        (lo.min(s.0[d]), hi.max(s.0[d]))
-                    });
-                hi - lo
-            })
-            .fold(0.0, f64::max);
-        if spread < tol.x || simplex[n].1 - simplex[0].1 < tol.f {
-            break;
-        }
-        let centroid: Vec<f64> = (0..n)
-            .map(|d| simplex[..n].iter().map(|s| s.0[d]).sum::<f64>() / n as f64)
-            .collect();
-        let worst = simplex[n].clone();
-        let reflected = point(&centroid, &worst.0, -1.0);
-        let expanded = point(&centroid, &worst.0, -2.0);
-        // The expansion is only used when the reflection is the best point
-        // yet: evaluated with it when side by side, else only then.
-        let (fr, speculative) = if f.side_by_side {
-            let both = f.values(&[reflected.clone(), expanded.clone()]);
-            (both[0], Some(both[1]))
-        } else {
-            (f.at(&reflected), None)
-        };
-        evals += 1 + usize::from(speculative.is_some());
-        if fr < simplex[0].1 {
-            let fe = match speculative {
-                Some(v) => v,
-                None => {
-                    evals += 1;
-                    f.at(&expanded)
-                }
-            };
-            simplex[n] = if fe < fr {
-                (expanded, fe)
-            } else {
-                (reflected, fr)
-            };
-        } else if fr < simplex[n - 1].1 {
-            simplex[n] = (reflected, fr);
-        } else {
-            let contracted = if fr < worst.1 {
-                point(&centroid, &reflected, 0.5)
-            } else {
-                point(&centroid, &worst.0, 0.5)
-            };
-            let fc = f.at(&contracted);
-            evals += 1;
-            if fc < worst.1.min(fr) {
-                simplex[n] = (contracted, fc);
-            } else {
-                let best = simplex[0].0.clone();
-                let shrunk: Vec<Vec<f64>> = simplex[1..]
-                    .iter()
-                    .map(|s| point(&best, &s.0, 0.5))
-                    .collect();
-                let values = f.values(&shrunk);
-                evals += n;
-                for (s, (x, v)) in simplex[1..].iter_mut().zip(shrunk.into_iter().zip(values)) {
-                    *s = (x, v);
-                }
-            }
-        }
-    }
-    simplex.sort_by(|a, b| a.1.total_cmp(&b.1));
-    simplex.swap_remove(0)
+/// Where a [`newton`] search ended: the minimum `x` (a coordinate the
+/// likelihood pushed against a bound held there, `limit` saying which side),
+/// `f` there, and the log-settings' standard deviations (`sqrt(diag(2 H^-1))`
+/// over the coordinates not at a bound; infinite where the likelihood does
+/// not curve, unused at a bound).
+struct Found {
+    x: Vec<f64>,
+    value: f64,
+    limit: Vec<Limit>,
+    sd: Vec<f64>,
 }
 
-/// Step of the finite-difference Hessian (in the logarithm of a setting).
-const HESSIAN_STEP: f64 = 0.15;
+/// Largest move (in the logarithm of a setting) of one Newton step: a
+/// factor of e, about the start's error from the misfits' moments.
+const MAX_NEWTON_STEP: f64 = 1.0;
 
-/// Standard deviations of the log-settings: `sqrt(diag(2 H^-1))` with `H`
-/// the finite-difference Hessian of `f = -2 ln L` at its minimum `x` (central
-/// differences, evaluated side by side); a direction the likelihood does not
-/// curve in gets an infinite one.
-fn log_sd(f: Objective, x: &[f64], fx: f64) -> Vec<f64> {
-    let n = x.len();
+/// The search stops after a step smaller than this in every log-setting
+/// (a fifth of a typical 1-sigma range).
+const NEWTON_DONE: f64 = 0.05;
+
+/// Minimisation of `f` (= `-2 ln L`, smooth and nearly quadratic in the
+/// log-settings) from `x0` within `bounds` (log units) by Newton's method on
+/// a finite-difference stencil: at `x` the `2m + m(m-1)/2` points
+/// `x +- h e_i` and `x + h e_i + h e_j` (all independent, so evaluated side
+/// by side) give the gradient and the Hessian
+/// `H_ii = (f_i+ - 2 f + f_i-) / h^2`,
+/// `H_ij = (f_ij - f_i+ - f_j+ + f) / h^2`, and the step solves
+/// `|H| s = -g` (`|H|`: eigenvalues by magnitude, floored, so a saddle or a
+/// flat direction still steps downhill), at most [`MAX_NEWTON_STEP`] per
+/// coordinate, halved up to twice if `f` does not fall. The last stencil's
+/// `H` is the curvature the ranges need: a Nelder-Mead search followed by a
+/// central-difference Hessian took 81 likelihoods on a 30-minute ride with
+/// three settings and 145 with four; this about half, in fewer rounds.
+///
+/// A coordinate stays `h` inside its bounds while free, so its stencil never
+/// meets the wall; when the step still points out from there, it is held at
+/// the bound (as far as the likelihood can tell, the setting is beyond it).
+fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: usize) -> Found {
+    let n = x0.len();
     let h = HESSIAN_STEP;
-    let at = |moves: &[(usize, f64)]| {
-        let mut y = x.to_vec();
-        for &(d, s) in moves {
-            y[d] += s;
+    let inside = |d: usize, v: f64| v.clamp(bounds[d].0 + h, bounds[d].1 - h);
+    let mut x: Vec<f64> = (0..n).map(|d| inside(d, x0[d])).collect();
+    let mut value = if x == x0 { f0 } else { f.at(&x) };
+    let mut limit = vec![Limit::None; n];
+    let mut sd = vec![f64::INFINITY; n];
+    for _ in 0..max_iter {
+        let free: Vec<usize> = (0..n).filter(|&d| limit[d] == Limit::None).collect();
+        let m = free.len();
+        if m == 0 {
+            break;
         }
-        y
-    };
-    let mut points = Vec::new();
-    for i in 0..n {
-        points.push(at(&[(i, h)]));
-        points.push(at(&[(i, -h)]));
-        for j in 0..i {
-            for (si, sj) in [(h, h), (h, -h), (-h, h), (-h, -h)] {
-                points.push(at(&[(i, si), (j, sj)]));
+        let moved = |moves: &[(usize, f64)]| {
+            let mut y = x.clone();
+            for &(d, s) in moves {
+                y[free[d]] += s;
+            }
+            y
+        };
+        let mut points = Vec::with_capacity(2 * m + m * (m - 1) / 2);
+        for i in 0..m {
+            points.push(moved(&[(i, h)]));
+            points.push(moved(&[(i, -h)]));
+        }
+        for i in 0..m {
+            for j in 0..i {
+                points.push(moved(&[(i, h), (j, h)]));
             }
         }
-    }
-    let mut values = f.values(&points).into_iter();
-    let mut next = || values.next().unwrap_or(f64::NAN);
-    let mut hess = DMatrix::<f64>::zeros(n, n);
-    for i in 0..n {
-        let (p, m) = (next(), next());
-        hess[(i, i)] = (p - 2.0 * fx + m) / (h * h);
-        for j in 0..i {
-            let (pp, pm, mp, mm) = (next(), next(), next(), next());
-            let v = (pp - pm - mp + mm) / (4.0 * h * h);
-            hess[(i, j)] = v;
-            hess[(j, i)] = v;
+        let values = f.values(&points);
+        let plus = |i: usize| values[2 * i];
+        let mut pair = values[2 * m..].iter();
+        let mut gradient = DVector::<f64>::zeros(m);
+        let mut hess = DMatrix::<f64>::zeros(m, m);
+        for i in 0..m {
+            gradient[i] = (plus(i) - values[2 * i + 1]) / (2.0 * h);
+            hess[(i, i)] = (plus(i) - 2.0 * value + values[2 * i + 1]) / (h * h);
+        }
+        for i in 0..m {
+            for j in 0..i {
+                let fij = pair.next().copied().unwrap_or(f64::NAN);
+                let v = (fij - plus(i) - plus(j) + value) / (h * h);
+                hess[(i, j)] = v;
+                hess[(j, i)] = v;
+            }
+        }
+        if !(gradient.iter().all(|g| g.is_finite()) && hess.iter().all(|v| v.is_finite())) {
+            break;
+        }
+        for (i, s) in sd_of(&hess).into_iter().enumerate() {
+            sd[free[i]] = s;
+        }
+        let eigen = hess.clone().symmetric_eigen();
+        let top = eigen.eigenvalues.amax();
+        let floor = (1e-3 * top).max(0.5);
+        let inverse_gradient = eigen.eigenvectors.transpose() * &gradient;
+        let scaled = DVector::from_iterator(
+            m,
+            inverse_gradient
+                .iter()
+                .zip(eigen.eigenvalues.iter())
+                .map(|(g, l)| -g / l.abs().max(floor)),
+        );
+        let mut step = &eigen.eigenvectors * scaled;
+        let longest = step.amax();
+        if longest > MAX_NEWTON_STEP {
+            step *= MAX_NEWTON_STEP / longest;
+        }
+        // A coordinate at its inner edge that the step pushes further out
+        // goes to the bound and is held there; then a fresh stencil.
+        let mut held = false;
+        for (i, &d) in free.iter().enumerate() {
+            let (lo, hi) = bounds[d];
+            if x[d] >= hi - h - 1e-9 && step[i] > 0.0 {
+                (x[d], limit[d], held) = (hi, Limit::AtLeast, true);
+            } else if x[d] <= lo + h + 1e-9 && step[i] < 0.0 {
+                (x[d], limit[d], held) = (lo, Limit::AtMost, true);
+            }
+        }
+        if held {
+            value = f.at(&x);
+            continue;
+        }
+        let target = |fraction: f64| -> Vec<f64> {
+            let mut y = x.clone();
+            for (i, &d) in free.iter().enumerate() {
+                y[d] = inside(d, x[d] + fraction * step[i]);
+            }
+            y
+        };
+        let full = target(1.0);
+        let size = |y: &[f64]| {
+            y.iter()
+                .zip(&x)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+        };
+        if size(&full) < NEWTON_DONE {
+            break;
+        }
+        let mut tried = vec![full];
+        let mut tried_values = vec![f.at(&tried[0])];
+        if tried_values[0].is_nan() || tried_values[0] >= value {
+            tried = vec![target(0.5), target(0.25)];
+            tried_values = f.values(&tried);
+        }
+        let best = (0..tried.len()).min_by(|&a, &b| tried_values[a].total_cmp(&tried_values[b]));
+        match best {
+            Some(b) if tried_values[b] < value => {
+                let step_size = size(&tried[b]);
+                value = tried_values[b];
+                x = tried.swap_remove(b);
+                if step_size < NEWTON_DONE {
+                    break;
+                }
+            }
+            _ => break,
         }
     }
+    Found {
+        x,
+        value,
+        limit,
+        sd,
+    }
+}
+
+/// `sqrt(diag(2 H^-1))` of a Hessian of `-2 ln L`; where it is not positive
+/// definite, each from its own curvature (infinite where there is none).
+fn sd_of(hess: &DMatrix<f64>) -> Vec<f64> {
+    let n = hess.nrows();
     match hess.clone().cholesky() {
         Some(ch) => {
             let inv = ch.inverse();
@@ -743,33 +738,75 @@ fn log_sd(f: Objective, x: &[f64], fx: f64) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::DVector;
+
+    /// `-2 ln L` of a correlated Gaussian in two log-settings: minimum at
+    /// `m`, `A^-1` the covariance.
+    fn quadratic(x: &[f64]) -> f64 {
+        let (a, m) = (
+            DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 6.0]),
+            DVector::from_vec(vec![0.4, -0.8]),
+        );
+        let d = DVector::from_row_slice(x) - m;
+        (d.transpose() * a * d)[(0, 0)]
+    }
 
     #[test]
-    fn nelder_mead_finds_a_quadratic_minimum() {
-        let f = |x: &[f64]| (x[0] - 1.0).powi(2) + 3.0 * (x[1] + 2.0).powi(2) + x[0] * x[1];
+    fn newton_finds_a_quadratic_minimum_and_its_ranges() {
         for side_by_side in [true, false] {
             let objective = Objective {
-                f: &f,
+                f: &quadratic,
                 side_by_side,
             };
-            let (x, _) = nelder_mead(
-                objective,
-                &[0.0, 0.0],
-                f(&[0.0, 0.0]),
-                &[0.5, 0.5],
-                Tolerance { x: 1e-6, f: 0.0 },
-                500,
-            );
-            // Minimum of the quadratic: solve the 2x2 system.
-            let a = DMatrix::from_row_slice(2, 2, &[2.0, 1.0, 1.0, 6.0]);
-            let b = DVector::from_vec(vec![2.0, -12.0]);
-            let want = a.lu().solve(&b).unwrap();
+            let wide = [(-5.0, 5.0); 2];
+            let found = newton(objective, &[0.0, 0.0], quadratic(&[0.0, 0.0]), &wide, 8);
             assert!(
-                (x[0] - want[0]).abs() < 1e-4 && (x[1] - want[1]).abs() < 1e-4,
-                "{x:?} vs {want}"
+                (found.x[0] - 0.4).abs() < 1e-6 && (found.x[1] + 0.8).abs() < 1e-6,
+                "{:?}",
+                found.x
             );
+            assert_eq!(found.limit, vec![Limit::None; 2]);
+            // Covariance A^-1 = 1 / 11 [[6, -1], [-1, 2]].
+            let want = [(6.0f64 / 11.0).sqrt(), (2.0f64 / 11.0).sqrt()];
+            for (sd, want) in found.sd.iter().zip(want) {
+                assert!((sd - want).abs() < 1e-6, "{sd} vs {want}");
+            }
         }
+    }
+
+    #[test]
+    fn newton_holds_a_setting_the_likelihood_pushes_past_its_bound() {
+        // The minimum at x1 = -0.8 lies below a bound at -0.5: x1 is held
+        // there, x0 found with x1 held (d/dx0 = 0: x0 = 0.4 + (-0.8 + 0.5) / 2).
+        let objective = Objective {
+            f: &quadratic,
+            side_by_side: true,
+        };
+        let bounds = [(-5.0, 5.0), (-0.5, 5.0)];
+        let found = newton(objective, &[0.0, 1.0], quadratic(&[0.0, 1.0]), &bounds, 8);
+        assert_eq!(found.limit, vec![Limit::None, Limit::AtMost]);
+        assert_eq!(found.x[1], -0.5);
+        assert!((found.x[0] - 0.25).abs() < 1e-3, "{:?}", found.x);
+        // With x1 held, x0's curvature alone: H_00 = 4, sd sqrt(2 / 4).
+        assert!((found.sd[0] - 0.5f64.sqrt()).abs() < 1e-6, "{:?}", found.sd);
+    }
+
+    #[test]
+    fn newton_walks_down_a_surface_that_is_not_quadratic() {
+        // -2 ln L of a variance-like setting: exp(-x) s + x has its minimum at ln s.
+        let f = |x: &[f64]| (-x[0]).exp() * 9.0 + x[0] + (-x[1]).exp() * 0.04 + x[1];
+        let objective = Objective {
+            f: &f,
+            side_by_side: true,
+        };
+        let found = newton(objective, &[0.0, 0.0], f(&[0.0, 0.0]), &[(-8.0, 8.0); 2], 8);
+        assert!((found.x[0] - 9f64.ln()).abs() < 0.02, "{:?}", found.x);
+        assert!((found.x[1] - 0.04f64.ln()).abs() < 0.02, "{:?}", found.x);
+        // Curvature 1 at the minimum: sd sqrt(2).
+        assert!(
+            found.sd.iter().all(|s| (s - 2f64.sqrt()).abs() < 0.05),
+            "{:?}",
+            found.sd
+        );
     }
 
     #[test]
@@ -814,18 +851,5 @@ mod tests {
             limit: Limit::AtMost,
         };
         assert_eq!(jitter.describe("m", 2), "at most 0.03 m");
-    }
-
-    #[test]
-    fn log_sd_inverts_the_curvature() {
-        // f = -2 ln L of a Gaussian in x with sd 0.3: f = (x / 0.3)^2.
-        let f = |x: &[f64]| (x[0] / 0.3).powi(2) + (x[1] / 0.1).powi(2);
-        let objective = Objective {
-            f: &f,
-            side_by_side: true,
-        };
-        let sd = log_sd(objective, &[0.0, 0.0], 0.0);
-        assert!((sd[0] - 0.3).abs() < 1e-9, "{sd:?}");
-        assert!((sd[1] - 0.1).abs() < 1e-9, "{sd:?}");
     }
 }
