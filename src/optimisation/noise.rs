@@ -582,15 +582,18 @@ const NEWTON_GAIN: f64 = 0.2;
 /// `H_ij = (f_ij - f_i+ - f_j+ + f) / h^2`, and the step solves
 /// `|H| s = -g` (`|H|`: eigenvalues by magnitude, floored, so a saddle or a
 /// flat direction still steps downhill), at most [`MAX_NEWTON_STEP`] per
-/// coordinate, tried with twice its length, and halved up to twice if `f`
-/// does not fall. The last stencil's
-/// `H` is the curvature the ranges need: a Nelder-Mead search followed by a
-/// central-difference Hessian took 81 likelihoods on a 30-minute ride with
-/// three settings and 145 with four; this about half, in fewer rounds.
+/// coordinate, tried at 1, 2 and 4 times its length side by side, and at
+/// a half and a quarter if none of those lowers `f`. It stops after a step
+/// below [`NEWTON_DONE`] that gains less than [`NEWTON_GAIN`]. The last
+/// stencil's `H` is the curvature the ranges need: a Nelder-Mead search
+/// followed by a central-difference Hessian took 81 likelihoods on a
+/// 30-minute ride with three settings and 145 with four; this takes 39 with
+/// three, in fewer rounds.
 ///
 /// A coordinate stays `h` inside its bounds while free, so its stencil never
-/// meets the wall; when the step still points out from there, it is held at
-/// the bound (as far as the likelihood can tell, the setting is beyond it).
+/// meets the wall; when it stands within `2h` of a bound and the step would
+/// take it past `h` from it, it is held at the bound (as far as the
+/// likelihood can tell, the setting is beyond it).
 fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: usize) -> Found {
     let n = x0.len();
     let h = HESSIAN_STEP;
