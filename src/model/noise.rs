@@ -102,44 +102,143 @@ pub(crate) fn next_in_chain(links: &[Link]) -> Vec<Option<usize>> {
 /// The whitening of every observation: GPS observations of one axis are
 /// linked to the previous fix's when the model has a correlation time and a
 /// wander (`sd_gm > 0`); barometric rows never are (the barometer's noise is
-/// its own). `tau = None` or `0` links nothing.
+/// its own). `tau = None` or `0` links nothing. Each observation's `update`
+/// scales its Kalman gain (see [`Filter::update`], [`robust_updates`]).
 pub(crate) fn links(obs: &[Observation], tau: Option<f64>) -> Vec<Link> {
-    let tau = tau.filter(|t| t.is_finite() && *t > 0.0);
-    // Per axis: the last linked observation and its filtered variance P.
-    let mut last: [Option<(usize, f64)>; 3] = [None; 3];
-    obs.iter()
-        .enumerate()
-        .map(|(k, o)| {
-            let (Some(tau), false, true) = (tau, o.baro, o.sd_gm > 0.0) else {
-                return Link::independent(o.sd_white);
-            };
-            let q = o.sd_gm * o.sd_gm;
-            let r = o.sd_white * o.sd_white;
-            let linked = last[o.axis].and_then(|(j, p)| {
-                let dt = o.t - obs[j].t;
-                (dt > 0.0 && dt <= OUTAGE_S).then(|| {
-                    // 1 - a^2 without cancellation for dt << tau.
-                    let one_minus = -(-2.0 * dt / tau).exp_m1();
-                    (j, (-dt / tau).exp(), p, one_minus)
-                })
-            });
-            let (prev, a, predicted) = match linked {
-                Some((j, a, p, one_minus)) => (Some(j), a, a * a * p + one_minus * q),
-                None => (None, 0.0, q),
-            };
-            let s = predicted + r;
-            let gain = predicted / s;
-            last[o.axis] = Some((k, predicted * r / s));
-            let u = 1.0 / s.sqrt();
-            Link {
-                prev,
-                u,
-                v: -a * u,
-                alpha: (1.0 - gain) * a,
-                kappa: gain,
-            }
+    let mut filter = Filter::new(tau);
+    (0..obs.len())
+        .map(|k| {
+            let prior = filter.predict(obs, k);
+            filter.update(k, prior, obs[k].update)
         })
         .collect()
+}
+
+/// The weight on each observation's Kalman update that a robust (Cauchy,
+/// scale `s` in whitened units) filter gives it, run along misfits `m_k`
+/// (m): `w_k = 1 / (1 + e'_k^2 / s^2)`, the loss's own weight on the
+/// innovation, and the wander passed on is updated by `w_k K_k m_k`.
+///
+/// What it is for: the noise search. Under the plain filter a jump of 30 m
+/// that lasts a minute is one large innovation (which the loss discounts),
+/// then a wander that has followed it, then another large innovation: the
+/// likelihood reads the jump as wander and prefers a wander as large as the
+/// jumps (on a simulated ride with hidden outliers, 3.3 m over 110 s for a
+/// true 1.5 m over 60 s; in a city 4.8 m over 93 s). Under the robust filter
+/// the wander stays put, every fix inside the jump is an outlier to the
+/// loss, and the wander is judged by the fixes that are not (1.7 m over 30
+/// s; the path 1.78 m from the truth instead of 2.08 m, and 4.69 m instead
+/// of 5.85 m in the city). The fit itself keeps the plain filter: there the
+/// wander taking the jump is what keeps the jump's fixes from pulling the
+/// path (each then constrains only the change from its neighbour); fitted
+/// under the robust filter's weights, each of them pulls the path's level
+/// and the city path ended 9.2 m from the truth.
+pub(crate) fn robust_updates(obs: &[Observation], tau: Option<f64>, m: &[f64], s: f64) -> Vec<f64> {
+    let mut filter = Filter::new(tau);
+    let mut z = vec![0.0; obs.len()];
+    (0..obs.len())
+        .map(|k| {
+            let prior = filter.predict(obs, k);
+            let z_prev = prior.prev.map_or(0.0, |j| z[j]);
+            let w = match prior.prev {
+                Some(_) if !obs[k].baro => {
+                    let e = (m[k] - prior.a * z_prev) / prior.s.sqrt();
+                    1.0 / (1.0 + (e / s).powi(2))
+                }
+                _ => 1.0,
+            };
+            let link = filter.update(k, prior, w);
+            z[k] = link.alpha * z_prev + link.kappa * m[k];
+            w
+        })
+        .collect()
+}
+
+/// The scalar Kalman filter of the wander, per axis, one observation at a time.
+struct Filter {
+    tau: Option<f64>,
+    /// Per axis: the last linked observation and its filtered variance P.
+    last: [Option<(usize, f64)>; 3],
+}
+
+/// Observation `k`'s prediction: the linked observation, `a_k`, the predicted
+/// wander variance `a^2 P + (1 - a^2) q^2`, the jitter `R` and `S` (their sum).
+#[derive(Clone, Copy)]
+struct Prior {
+    axis: usize,
+    prev: Option<usize>,
+    a: f64,
+    predicted: f64,
+    s: f64,
+    /// An observation the filter does not follow (independent, barometric).
+    independent: Option<f64>,
+}
+
+impl Filter {
+    fn new(tau: Option<f64>) -> Self {
+        Self {
+            tau: tau.filter(|t| t.is_finite() && *t > 0.0),
+            last: [None; 3],
+        }
+    }
+
+    fn predict(&self, obs: &[Observation], k: usize) -> Prior {
+        let o = &obs[k];
+        let (Some(tau), false, true) = (self.tau, o.baro, o.sd_gm > 0.0) else {
+            return Prior {
+                axis: o.axis,
+                prev: None,
+                a: 0.0,
+                predicted: 0.0,
+                s: o.sd_white * o.sd_white,
+                independent: Some(o.sd_white),
+            };
+        };
+        let q = o.sd_gm * o.sd_gm;
+        let r = o.sd_white * o.sd_white;
+        let linked = self.last[o.axis].and_then(|(j, p)| {
+            let dt = o.t - obs[j].t;
+            (dt > 0.0 && dt <= OUTAGE_S).then(|| {
+                // 1 - a^2 without cancellation for dt << tau.
+                let one_minus = -(-2.0 * dt / tau).exp_m1();
+                let a = (-dt / tau).exp();
+                (j, a, a * a * p + one_minus * q)
+            })
+        });
+        let (prev, a, predicted) = match linked {
+            Some((j, a, predicted)) => (Some(j), a, predicted),
+            None => (None, 0.0, q),
+        };
+        Prior {
+            axis: o.axis,
+            prev,
+            a,
+            predicted,
+            s: predicted + r,
+            independent: None,
+        }
+    }
+
+    /// The link of an observation predicted as `prior`, its gain scaled by
+    /// `w` (1: the plain filter): `K = w (S - R) / S`, `z_k = (1 - K) a z_prev
+    /// + K m_k`, `P = (1 - K)(S - R)`, which is the filter's update for a
+    /// jitter inflated to `R + S (1 / w - 1)`; the innovation keeps the plain
+    /// `S` (the loss, not the filter, discounts it).
+    fn update(&mut self, k: usize, prior: Prior, w: f64) -> Link {
+        if let Some(sd) = prior.independent {
+            return Link::independent(sd);
+        }
+        let gain = w * prior.predicted / prior.s;
+        self.last[prior.axis] = Some((k, (1.0 - gain) * prior.predicted));
+        let u = 1.0 / prior.s.sqrt();
+        Link {
+            prev: prior.prev,
+            u,
+            v: -prior.a * u,
+            alpha: (1.0 - gain) * prior.a,
+            kappa: gain,
+        }
+    }
 }
 
 /// A first guess of the GPS error's wander (sigma per axis, correlation
@@ -214,6 +313,23 @@ pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64
 }
 
 impl Model {
+    /// Give every observation the update weight of the robust filter run
+    /// along its misfit `x_k - y_k` at `theta` ([`robust_updates`]; `x` the
+    /// path values, one per observation, as a linearisation holds them), for
+    /// a model whose GPS rows have a robust loss and a correlation time;
+    /// otherwise every weight stays 1.
+    pub(crate) fn weigh_updates(&mut self, theta: &[f64], x: &[f64]) {
+        let (Some(s), Some(_)) = (self.robust_scale(), self.spec.gps_tau_s) else {
+            return;
+        };
+        let plan = self.obs_plan(theta);
+        let metres: Vec<f64> = x.iter().zip(&plan.target).map(|(x, y)| x - y).collect();
+        let w = robust_updates(&self.observations, self.spec.gps_tau_s, &metres, s);
+        for (o, w) in self.observations.iter_mut().zip(w) {
+            o.update = w;
+        }
+    }
+
     /// [`gps_noise_guess`] from the horizontal misfits of the path values `x`
     /// (one per observation, as a linearisation holds them) at `theta`.
     pub(crate) fn gps_noise_guess(&self, theta: &[f64], x: &[f64]) -> Option<(f64, f64, f64)> {
@@ -268,6 +384,7 @@ mod tests {
             sd_gm,
             baro,
             t,
+            update: 1.0,
         }
     }
 
@@ -377,6 +494,52 @@ mod tests {
         let log_det: f64 = l.iter().map(|l| -2.0 * l.u.ln()).sum();
         let want = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
         assert!((log_det - want).abs() < 1e-9, "{log_det} vs {want}");
+    }
+
+    #[test]
+    fn the_robust_filter_does_not_follow_a_jump() {
+        // Wander 1.5 m over 60 s plus 0.3 m of jitter, and a 30 m jump from
+        // fix 200 to fix 239: the plain filter's wander follows the jump
+        // within a few fixes; the robust one's stays put, and it weighs the
+        // jump's fixes down and the others hardly at all.
+        let (tau, sd_gm, sd_white) = (60.0, 1.5, 0.3);
+        let mut rng = crate::simulation::rng::Rng::new(3);
+        let a: f64 = (-1.0f64 / tau).exp();
+        let mut g = sd_gm * rng.normal();
+        let mut m = Vec::new();
+        for k in 0..400 {
+            g = a * g + (1.0 - a * a).sqrt() * sd_gm * rng.normal();
+            let jump = if (200..240).contains(&k) { 30.0 } else { 0.0 };
+            m.push(g + sd_white * rng.normal() + jump);
+        }
+        let mut o: Vec<Observation> = (0..m.len())
+            .map(|i| gm_obs(i as f64, 0, false, sd_gm, sd_white))
+            .collect();
+        let w = robust_updates(&o, Some(tau), &m, 2.385);
+        assert!(w[200..240].iter().all(|w| *w < 0.05), "{:?}", &w[200..240]);
+        let typical = w[..200]
+            .iter()
+            .chain(&w[240..])
+            .filter(|w| **w > 0.5)
+            .count();
+        assert!(
+            typical >= 340,
+            "{typical} of 360 fixes outside the jump weigh over a half"
+        );
+        let wander_at = |o: &[Observation], k: usize| {
+            let l = links(o, Some(tau));
+            let mut z = vec![0.0; m.len()];
+            for i in 0..=k {
+                let zp = l[i].prev.map_or(0.0, |j| z[j]);
+                z[i] = l[i].alpha * zp + l[i].kappa * m[i];
+            }
+            z[k]
+        };
+        assert!(wander_at(&o, 220) > 25.0, "the plain filter follows");
+        for (o, w) in o.iter_mut().zip(&w) {
+            o.update = *w;
+        }
+        assert!(wander_at(&o, 220).abs() < 5.0, "{}", wander_at(&o, 220));
     }
 
     #[test]

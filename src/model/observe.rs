@@ -215,6 +215,14 @@ impl ObsPlan {
 }
 
 impl Model {
+    /// The Cauchy scale on GPS rows (whitened units), when an effect asks for a robust loss.
+    pub(crate) fn robust_scale(&self) -> Option<f64> {
+        if self.least_squares {
+            return None;
+        }
+        self.effects.iter().find_map(|e| e.robust_scale())
+    }
+
     /// Of every observation for a computed path: `x_k - y_k` (m, model minus
     /// measurement) and its normalised innovation `e'_k = u_k m_k + v_k z_{k-1}`
     /// (see [`super::noise`]), before the robust loss: what the fit's noise
@@ -276,14 +284,10 @@ impl Model {
         let n = obs.len();
         let mut lag = None;
         let mut lag_value = 0.0;
-        let mut robust = None;
         for (e, effect) in self.effects.iter().enumerate() {
             if let Some(l) = effect.gps_lag(self.params_of(e, theta)) {
                 lag = Some(self.offsets[e]);
                 lag_value = l;
-            }
-            if let Some(s) = effect.robust_scale() {
-                robust = Some(s);
             }
         }
         let mut row = Vec::with_capacity(n);
@@ -356,7 +360,7 @@ impl Model {
             shift_start,
             lag,
             lag_moves,
-            robust,
+            robust: self.robust_scale(),
             links: noise::links(obs, self.spec.gps_tau_s),
         }
     }

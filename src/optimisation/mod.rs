@@ -352,9 +352,15 @@ impl Reconstruction {
                 }));
             }
         }
+        let model = self.model.restricted(t_end)?;
         Ok(Some(Window {
             length,
-            model: self.model.restricted(t_end)?,
+            // The first window by least squares (see `Model::least_squares`).
+            model: if self.window.is_none() {
+                model.least_squares()
+            } else {
+                model
+            },
             from: None,
         }))
     }

@@ -283,7 +283,9 @@ fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec 
 
 /// `-2 ln L` of `spec` linearised at `theta` over the `free` parameters
 /// (see the module docs), from `base`, the chain system of `model` there;
-/// `None` when the solve fails.
+/// `None` when the solve fails. Under a robust loss the wander is filtered
+/// by the robust filter at `spec` (see `model::noise::robust_updates`), so
+/// that GPS jumps count as outliers, not as evidence of a large wander.
 pub fn neg2_log_likelihood(
     model: &Model,
     base: &ChainSystem,
@@ -291,7 +293,8 @@ pub fn neg2_log_likelihood(
     free: &[bool],
     spec: &ModelSpec,
 ) -> Option<f64> {
-    let m = Model::with_start(model.signals.clone(), spec.clone(), model.start.clone()).ok()?;
+    let mut m = Model::with_start(model.signals.clone(), spec.clone(), model.start.clone()).ok()?;
+    m.weigh_updates(theta, &base.linearisation().x);
     let chain = m.chain_system_like(base, theta)?;
     let (delta, log_det) = chain.solve_with_log_det(0.0)?;
     let fit = chain.cost() - chain.predicted_decrease(&delta);
