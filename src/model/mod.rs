@@ -422,6 +422,11 @@ impl Model {
         self
     }
 
+    /// Whether [`Model::least_squares`] made this model.
+    pub fn is_least_squares(&self) -> bool {
+        self.least_squares
+    }
+
     /// Rows `0..horizon` that the sweeps cover.
     pub(crate) fn horizon(&self) -> usize {
         self.horizon

@@ -741,6 +741,18 @@ impl Reconstruction {
             check_observability(&model)?;
             self.theta = model.carry_over(&self.model, &self.theta);
             self.model = model;
+            // Step 1's window was cut from the old model: its parameters no
+            // longer match theta's layout (a new segment length changes their
+            // number). Cut it again over the same stretch.
+            if let Some(w) = &self.window {
+                let (length, first) = (w.length, w.model.is_least_squares());
+                let model = self.model.restricted(self.model.signals.t[0] + length)?;
+                self.window = Some(Window {
+                    length,
+                    model: if first { model.least_squares() } else { model },
+                    from: None,
+                });
+            }
         }
         if new.damping != self.settings.damping {
             self.lm = LmState::new(new.damping);
@@ -818,5 +830,25 @@ mod tests {
                 "{method:?}: slopes not fitted in step 2"
             );
         }
+    }
+
+    /// A new segment length in the middle of step 1 (the app's slider) cuts
+    /// the window again: its model once kept the old segments, and LM indexed
+    /// the new model's mask past its end.
+    #[test]
+    fn a_new_segment_length_in_step_1_recuts_the_window() {
+        let sig = Arc::new(crate::testing::simulated_signals(5, 900.0, &[]));
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+        while !fit.widened {
+            fit.iterate();
+        }
+        assert!(fit.phase() == Phase::Step1 && fit.window.is_some());
+        let mut settings = fit.settings().clone();
+        settings.model.segment_s = 10.0;
+        fit.apply_settings(settings).expect("settings");
+        let n = fit.model().n_params();
+        assert_eq!(fit.window.as_ref().map(|w| w.model.n_params()), Some(n));
+        fit.finish();
+        assert!(fit.stats().rms_horizontal_m < 5.0, "{:?}", fit.stats());
     }
 }
