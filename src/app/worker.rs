@@ -193,15 +193,33 @@ impl WorkerHandle {
         let spawned = std::thread::Builder::new()
             .name("gyropath-worker".into())
             .spawn(move || {
-                Worker {
-                    settings,
-                    ride: None,
-                    running: false,
-                    tx: worker_tx,
-                    wake: Arc::new(wake),
-                    sigma: None,
+                let wake: Arc<dyn Fn() + Send + Sync> = Arc::new(wake);
+                // A bug that panics must not leave a window that silently
+                // stops answering: say so and start a fresh worker.
+                loop {
+                    let worker = Worker {
+                        settings: settings.clone(),
+                        ride: None,
+                        running: false,
+                        tx: worker_tx.clone(),
+                        wake: wake.clone(),
+                        sigma: None,
+                    };
+                    let run = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        worker.run(&worker_rx)
+                    }));
+                    let Err(payload) = run else { break };
+                    let what = payload
+                        .downcast_ref::<&str>()
+                        .map(|s| s.to_string())
+                        .or_else(|| payload.downcast_ref::<String>().cloned())
+                        .unwrap_or_default();
+                    let _ = worker_tx.send(Update::Error(format!(
+                        "the fit stopped on an internal error ({what}); open the ride again, \
+                         and please report this with the ride"
+                    )));
+                    wake();
                 }
-                .run(worker_rx)
             });
         if let Err(e) = spawned {
             // Without a worker nothing can be fitted; say so in the window.
@@ -256,7 +274,7 @@ impl Worker {
         (self.wake)();
     }
 
-    fn run(mut self, rx: Receiver<Request>) {
+    fn run(mut self, rx: &Receiver<Request>) {
         let mut last_snapshot = Instant::now() - SNAPSHOT_INTERVAL;
         loop {
             let busy = self.running && self.fit().is_some_and(|f| !f.is_done());
