@@ -35,9 +35,15 @@
 //!
 //! is what the cost sums (its square, through the robust loss when there is
 //! one), and `sum_k ln S_k` is the log-determinant of the errors' covariance.
-//! The first fix of a chain, and the first after an outage longer than
-//! [`OUTAGE_S`] (the receiver re-acquires and its error starts afresh), has
-//! `a = 0`: `S = q^2 + R`. Without a jitter (`R = 0`) the filter is
+//! The first fix of each axis has `a = 0`: `S = q^2 + R`. An outage is
+//! bridged as any gap is, `a = exp(-dt / tau)`: a gap of a few correlation
+//! times forgets the wander, a shorter one does not. The atmosphere's part
+//! of the error runs on while the receiver sees nothing, and restarting the
+//! wander after every gap over 10 s, as this model once did, threw away what
+//! the fixes on either side say about it: on simulated rides (wander running
+//! through 20-60 s outages) the estimated wander came out 19 % small and its
+//! time 22 % short, and the path's 95 % ellipses held the truth at 76 % of
+//! the rows instead of 83 %. Without a jitter (`R = 0`) the filter is
 //! exact after one fix and `e'_k = (m_k - a_k m_{k-1}) / (q_k sqrt(1 - a_k^2))`;
 //! without a correlation time every fix is independent with `S_k = sigma_k^2`,
 //! the paper's least squares with per-fix weights.
@@ -51,7 +57,9 @@
 
 use super::{Model, Observation};
 
-/// Two fixes further apart than this (s) are not linked: the second starts a new chain.
+/// Consecutive fixes further apart than this (s) are not a pair in the
+/// moments of [`gps_noise_guess`] (its lag-one covariance assumes the
+/// median spacing).
 pub const OUTAGE_S: f64 = 10.0;
 
 /// Correlation times at or above this (s) are refused: `a` would be 1 to the
@@ -198,7 +206,7 @@ impl Filter {
         let r = o.sd_white * o.sd_white;
         let linked = self.last[o.axis].and_then(|(j, p)| {
             let dt = o.t - obs[j].t;
-            (dt > 0.0 && dt <= OUTAGE_S).then(|| {
+            (dt > 0.0).then(|| {
                 // 1 - a^2 without cancellation for dt << tau.
                 let one_minus = -(-2.0 * dt / tau).exp_m1();
                 let a = (-dt / tau).exp();
@@ -428,7 +436,7 @@ mod tests {
     }
 
     #[test]
-    fn links_follow_each_axis_and_restart_after_an_outage() {
+    fn links_follow_each_axis_and_bridge_an_outage() {
         let o = vec![
             obs(0.0, 0, false),
             obs(0.0, 1, false),
@@ -448,7 +456,11 @@ mod tests {
             Link::independent(0.5),
             "barometric rows are never linked"
         );
-        assert_eq!(l[6].prev, None, "29 s gap: a new chain");
+        // A 29 s gap is bridged: a = exp(-29 / 60), S = q^2 (1 - a^2) (no jitter).
+        assert_eq!(l[6].prev, Some(3), "29 s gap: the wander carries on");
+        let a29 = (-29.0f64 / 60.0).exp();
+        assert!((l[6].u - 1.0 / (1.0 - a29 * a29).sqrt()).abs() < 1e-9);
+        assert!((l[6].v / l[6].u + a29).abs() < 1e-15);
         assert_eq!(l[7].prev, Some(6));
         // Without a jitter: e' = (m_k - a m_{k-1}) / (sigma sqrt(1 - a^2)).
         let a = (-1.0f64 / 60.0).exp();
@@ -466,8 +478,8 @@ mod tests {
 
     #[test]
     fn the_filter_is_the_exact_whitening_of_wander_plus_jitter() {
-        // Two chains (an outage between them) of wander 1.5 m over 20 s plus a
-        // per-fix jitter: sum e'^2 = m^T Sigma^-1 m and sum ln S = ln det Sigma.
+        // Wander 1.5 m over 20 s plus a per-fix jitter, with a 30 s outage
+        // bridged: sum e'^2 = m^T Sigma^-1 m and sum ln S = ln det Sigma.
         let tau = 20.0;
         let mut o = Vec::new();
         for k in 0..40 {
@@ -477,12 +489,7 @@ mod tests {
         let n = o.len();
         let l = links(&o, Some(tau));
         let sigma = nalgebra::DMatrix::from_fn(n, n, |i, j| {
-            let linked = (i < 25) == (j < 25);
-            let wander = if linked {
-                1.5f64.powi(2) * (-(o[i].t - o[j].t).abs() / tau).exp()
-            } else {
-                0.0
-            };
+            let wander = 1.5f64.powi(2) * (-(o[i].t - o[j].t).abs() / tau).exp();
             wander + if i == j { o[i].sd_white.powi(2) } else { 0.0 }
         });
         let m: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin() * 2.0).collect();
