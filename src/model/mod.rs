@@ -84,6 +84,12 @@ pub struct ModelSpec {
     /// to the horizontal; scaled by the fix's logged accuracy). See [`noise`].
     #[serde(default)]
     pub gps_white_m: f64,
+    /// The GPS heights' own jitter (m) with a correlation time, when known
+    /// apart from the horizontal one (the noise search takes it from the
+    /// heights' misfits); `None`: the horizontal jitter times the heights'
+    /// ratio `sigma_vertical_m / sigma_horizontal_m`.
+    #[serde(default)]
+    pub gps_white_vertical_m: Option<f64>,
     pub increment: Increment,
 }
 
@@ -98,6 +104,7 @@ impl Default for ModelSpec {
             sigma_baro_m: 1.0,
             gps_tau_s: None,
             gps_white_m: 0.0,
+            gps_white_vertical_m: None,
             increment: Increment::Exact,
         }
     }
@@ -231,6 +238,13 @@ impl Model {
                 noise::MAX_TAU_S
             )));
         }
+        if let Some(v) = spec.gps_white_vertical_m
+            && !(v.is_finite() && v >= 0.0)
+        {
+            return Err(ModelError::Setting(format!(
+                "GPS vertical jitter must be zero or a positive number of metres, got {v}"
+            )));
+        }
         if !(spec.gps_white_m.is_finite() && spec.gps_white_m >= 0.0) {
             return Err(ModelError::Setting(format!(
                 "GPS jitter must be zero or a positive number of metres, got {}",
@@ -265,18 +279,21 @@ impl Model {
         // (wander, jitter) of a GPS axis of sigma `sigma`, each scaled by the
         // fix's accuracy: the jitter alone for independent fixes; with a
         // correlation time the wander is the setting and the jitter keeps the
-        // horizontal ratio.
+        // horizontal ratio, unless the heights have their own (`vertical`).
         let correlated = spec.gps_tau_s.is_some_and(|t| t > 0.0);
-        let split = |sigma: f64, acc: Option<f64>, scale: Option<f64>| {
+        let split = |sigma: f64, acc: Option<f64>, scale: Option<f64>, vertical: bool| {
             if correlated {
-                let white = sigma * spec.gps_white_m / spec.sigma_horizontal_m;
+                let white = spec
+                    .gps_white_vertical_m
+                    .filter(|_| vertical)
+                    .unwrap_or(sigma * spec.gps_white_m / spec.sigma_horizontal_m);
                 (fix_sigma(sigma, acc, scale), fix_sigma(white, acc, scale))
             } else {
                 (0.0, fix_sigma(sigma, acc, scale))
             }
         };
         for fix in &signals.fixes {
-            let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, fix.hacc, h_scale);
+            let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, fix.hacc, h_scale, false);
             for axis in 0..2 {
                 observations.push(Observation {
                     row: fix.row,
@@ -290,7 +307,7 @@ impl Model {
                 });
             }
             if let Some(up) = fix.up {
-                let (sd_gm, sd_white) = split(spec.sigma_vertical_m, fix.vacc, v_scale);
+                let (sd_gm, sd_white) = split(spec.sigma_vertical_m, fix.vacc, v_scale, true);
                 observations.push(Observation {
                     row: fix.row,
                     axis: 2,

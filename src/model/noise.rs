@@ -338,16 +338,27 @@ impl Model {
         }
     }
 
-    /// [`gps_noise_guess`] from the horizontal misfits of the path values `x`
-    /// (one per observation, as a linearisation holds them) at `theta`.
-    pub(crate) fn gps_noise_guess(&self, theta: &[f64], x: &[f64]) -> Option<(f64, f64, f64)> {
+    /// Whether any GPS height is observed (a planar model observes none).
+    pub(crate) fn observes_gps_heights(&self) -> bool {
+        self.observations.iter().any(|o| o.axis == 2 && !o.baro)
+    }
+
+    /// [`gps_noise_guess`] from the horizontal (`vertical`: the GPS
+    /// heights') misfits of the path values `x` (one per observation, as a
+    /// linearisation holds them) at `theta`.
+    pub(crate) fn gps_noise_guess(
+        &self,
+        theta: &[f64],
+        x: &[f64],
+        vertical: bool,
+    ) -> Option<(f64, f64, f64)> {
         let plan = self.obs_plan(theta);
         let misfits: Vec<(f64, usize, f64)> = self
             .observations
             .iter()
             .zip(x)
             .zip(&plan.target)
-            .filter(|((o, _), _)| !o.baro && o.axis < 2)
+            .filter(|((o, _), _)| !o.baro && (o.axis == 2) == vertical)
             .map(|((o, x), y)| (o.t, o.axis, x - y))
             .collect();
         gps_noise_guess(&misfits)
