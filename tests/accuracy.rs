@@ -187,10 +187,14 @@ fn the_same_ride_logged_at_10_100_and_1000_hz_gives_the_same_path() {
         assert!(e.path_at_fixes_m < e.fixes_m, "{rate} Hz: {e:?}");
         errors.push(e.path_at_fixes_m);
     }
+    // The simulator draws its noise row by row, so each rate is another
+    // realisation (fixes 2.05-2.86 m from the truth) and a path may come out
+    // better at one rate than another; a rate handled wrongly (a step's dt,
+    // the pulses per step) makes it worse, by metres.
     let reference = errors[1];
     for e in errors {
         assert!(
-            (e - reference).abs() < 0.5 + 0.25 * reference,
+            e < reference + 0.5 + 0.25 * reference,
             "{e} m vs {reference} m at 100 Hz"
         );
     }

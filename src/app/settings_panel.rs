@@ -137,6 +137,11 @@ impl GyropathApp {
                     ui.label("GPS jitter");
                     ui.label(n.gps_white_m.describe("m", 2));
                     ui.end_row();
+                    if let Some(heights) = n.heights_text() {
+                        ui.label("GPS heights");
+                        ui.label(heights);
+                        ui.end_row();
+                    }
                     ui.label("bias walk");
                     ui.label(n.walk_text("°/s/√s"));
                     ui.end_row();

@@ -210,11 +210,15 @@ impl NoiseEstimate {
         }
     }
 
-    /// The heights' ratio in words, when it was estimated.
+    /// The GPS heights' noise in words, when it was estimated: "2.0 times
+    /// the horizontal wander (1.8-2.2), jitter 1.52 m".
     pub fn heights_text(&self) -> Option<String> {
         self.gps_vertical_ratio.estimated.then(|| {
+            let jitter = self
+                .gps_white_vertical_m
+                .map_or(String::new(), |j| format!(", jitter {j:.2} m"));
             format!(
-                "heights {} the horizontal",
+                "{} the horizontal wander{jitter}",
                 self.gps_vertical_ratio.describe("times", 2)
             )
         })
@@ -224,7 +228,7 @@ impl NoiseEstimate {
     pub fn describe(&self) -> String {
         let heights = self
             .heights_text()
-            .map_or(String::new(), |h| format!(", {h}"));
+            .map_or(String::new(), |h| format!(", heights {h}"));
         format!(
             "GPS sigma {}, {}, {}{heights}, bias walk {}",
             self.gps_sigma_m.describe("m", 2),
