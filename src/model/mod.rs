@@ -80,8 +80,9 @@ pub struct ModelSpec {
     #[serde(default)]
     pub gps_tau_s: Option<f64>,
     /// With a correlation time: the jitter of each fix on top of the wander
-    /// (m, horizontal; the vertical one keeps the ratio of the vertical sigma
-    /// to the horizontal; scaled by the fix's logged accuracy). See [`noise`].
+    /// (m, horizontal; the vertical one is `gps_white_vertical_m` or keeps the
+    /// ratio of the vertical sigma to the horizontal; scaled by the fix's
+    /// logged accuracy). See [`noise`].
     #[serde(default)]
     pub gps_white_m: f64,
     /// The GPS heights' own jitter (m) with a correlation time, when known
