@@ -410,14 +410,20 @@ mod tests {
 
     /// Innovations of misfits `m` as the whitener computes them.
     fn innovations(l: &[Link], m: &[f64]) -> Vec<f64> {
+        filtered(l, m).0
+    }
+
+    /// Innovations of misfits `m` and the filtered wander after each.
+    fn filtered(l: &[Link], m: &[f64]) -> (Vec<f64>, Vec<f64>) {
         let mut z = vec![0.0; m.len()];
-        (0..m.len())
+        let e = (0..m.len())
             .map(|k| {
                 let zp = l[k].prev.map_or(0.0, |j| z[j]);
                 z[k] = l[k].alpha * zp + l[k].kappa * m[k];
                 l[k].u * m[k] + l[k].v * zp
             })
-            .collect()
+            .collect();
+        (e, z)
     }
 
     #[test]
@@ -545,15 +551,7 @@ mod tests {
             typical >= 340,
             "{typical} of 360 fixes outside the jump weigh over a half"
         );
-        let wander_at = |o: &[Observation], k: usize| {
-            let l = links(o, Some(tau));
-            let mut z = vec![0.0; m.len()];
-            for i in 0..=k {
-                let zp = l[i].prev.map_or(0.0, |j| z[j]);
-                z[i] = l[i].alpha * zp + l[i].kappa * m[i];
-            }
-            z[k]
-        };
+        let wander_at = |o: &[Observation], k: usize| filtered(&links(o, Some(tau)), &m).1[k];
         assert!(wander_at(&o, 220) > 25.0, "the plain filter follows");
         for (o, w) in o.iter_mut().zip(&w) {
             o.update = *w;

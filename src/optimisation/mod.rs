@@ -352,17 +352,22 @@ impl Reconstruction {
                 }));
             }
         }
-        let model = self.model.restricted(t_end)?;
-        Ok(Some(Window {
+        // The first window by least squares (see `Model::least_squares`).
+        self.cut_window(length, self.window.is_none()).map(Some)
+    }
+
+    /// Step 1's window over the ride's first `length` seconds, from row 0.
+    fn cut_window(&self, length: f64, least_squares: bool) -> Result<Window, FitError> {
+        let model = self.model.restricted(self.model.signals.t[0] + length)?;
+        Ok(Window {
             length,
-            // The first window by least squares (see `Model::least_squares`).
-            model: if self.window.is_none() {
+            model: if least_squares {
                 model.least_squares()
             } else {
                 model
             },
             from: None,
-        }))
+        })
     }
 
     /// The first step and start time of the first segment starting at or after `from`.
@@ -745,13 +750,7 @@ impl Reconstruction {
             // longer match theta's layout (a new segment length changes their
             // number). Cut it again over the same stretch.
             if let Some(w) = &self.window {
-                let (length, first) = (w.length, w.model.is_least_squares());
-                let model = self.model.restricted(self.model.signals.t[0] + length)?;
-                self.window = Some(Window {
-                    length,
-                    model: if first { model.least_squares() } else { model },
-                    from: None,
-                });
+                self.window = Some(self.cut_window(w.length, w.model.is_least_squares())?);
             }
         }
         if new.damping != self.settings.damping {

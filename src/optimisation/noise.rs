@@ -313,7 +313,7 @@ fn clamp(x: [f64; SETTINGS], bounds: &[(f64, f64); SETTINGS]) -> [f64; SETTINGS]
 }
 
 /// `spec` with the settings `which` covers taken from the log-space point
-/// `x` (sigma, tau, walk, jitter); the others stay as set (independent fixes, no
+/// `x` (sigma, tau, walk, jitter, the heights' ratio); the others stay as set (independent fixes, no
 /// prior), so the likelihood is that of the model the fit will run.
 fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec {
     let mut out = spec.clone();
