@@ -5,7 +5,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
 use super::Model;
-use super::observe::Whitener;
+use super::observe::{ObsValue, Whitener};
 
 /// Rows per chunk of the parallel forward sweep (and at most this many chunks):
 /// a 30-minute ride at 100 Hz is two chunks, one per core of a small machine.
@@ -354,27 +354,29 @@ impl Model {
         t
     }
 
-    /// Weighted residuals (observations, then priors) of a computed path.
-    pub fn residuals_of(&self, theta: &[f64], path: &Trajectory) -> Vec<f64> {
+    /// The whitened observation values for `theta`, from one sweep that keeps
+    /// the path only at the observed rows (never the whole ride: on a 6-hour
+    /// ride a full trajectory is 190 MB).
+    fn observation_values(&self, theta: &[f64]) -> Vec<ObsValue> {
         let plan = self.obs_plan(theta);
         let obs = &self.observations;
-        let x = obs.iter().enumerate().map(|(k, o)| {
-            let j = plan.row[k];
-            let delta = path.p[j] - path.p[j.max(1) - 1];
-            plan.x(k, o.axis, &path.p[j], &delta)
-        });
-        let mut r: Vec<f64> = Whitener::new(&plan, obs)
-            .all(x)
+        let fw = self.forward(theta, self.sweep_start(theta), None, &plan.row, false);
+        let x = obs
+            .iter()
+            .enumerate()
+            .map(|(k, o)| plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
+        Whitener::new(&plan, obs).all(x)
+    }
+
+    /// Weighted residuals (observations, then priors) for `theta`.
+    pub fn residuals(&self, theta: &[f64]) -> Vec<f64> {
+        let mut r: Vec<f64> = self
+            .observation_values(theta)
             .into_iter()
             .map(|v| v.r)
             .collect();
         r.extend(self.prior_rows(theta).residuals);
         r
-    }
-
-    /// Weighted residuals for `theta`.
-    pub fn residuals(&self, theta: &[f64]) -> Vec<f64> {
-        self.residuals_of(theta, &self.trajectory(theta))
     }
 
     /// The cost `C = sum r^2` (eq. 7 with weights, plus priors) without storing the path.
@@ -384,13 +386,8 @@ impl Model {
 
     /// Cost and the unweighted squared misfits per kind of row, in one sweep.
     pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
-        let plan = self.obs_plan(theta);
-        let obs = &self.observations;
-        let fw = self.forward(theta, self.sweep_start(theta), None, &plan.row, false);
         let mut ev = Evaluation::default();
-        let mut white = Whitener::new(&plan, obs);
-        for (k, o) in obs.iter().enumerate() {
-            let v = white.value(k, plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
+        for (o, v) in self.observations.iter().zip(self.observation_values(theta)) {
             ev.cost += v.r * v.r;
             let slot = match (o.axis, o.baro) {
                 (2, true) => 2,
