@@ -1,0 +1,229 @@
+//! The map: GPS fixes and the reconstructed path in local metres (equal
+//! aspect), coloured by outage or residual, with the path's 95 % ellipses,
+//! the time hovered in the other plots, a scale bar and the tile background.
+
+use egui::Color32;
+use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, Points};
+
+use super::axes::{nearest, nice_grid, nice_grid_y, nice_step, runs, thin_to_pixels, tick_label};
+use super::{GPS, OUTAGE, PATH, RESIDUAL_BINS, SCALE, SIGMA};
+use crate::app::map_tiles::{MapBackground, attribution_ui};
+use crate::app::worker::{RideView, SigmaView, Snapshot};
+
+/// GPS fixes and reconstructed path in local metres, equal aspect.
+pub fn map_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: Option<&Snapshot>,
+    colour_by_residual: bool,
+    hover_t: Option<f64>,
+    mut background: Option<&mut MapBackground>,
+) {
+    let shown = Plot::new("map")
+        .data_aspect(1.0)
+        .x_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid_y)
+        .x_axis_formatter(tick_label)
+        .y_axis_formatter(tick_label)
+        .legend(Legend::default())
+        .x_axis_label("east (m)")
+        .y_axis_label("north (m)")
+        .show(ui, |plot| {
+            if let Some(bg) = background.as_deref_mut() {
+                let layer = bg.layer(plot.ctx(), plot.transform(), &ride.frame);
+                plot.add(layer);
+            }
+            let fixes = thin_to_pixels(plot, ride.fixes.iter().map(|f| [f[1], f[2]]));
+            plot.points(
+                Points::new("GPS fixes", fixes)
+                    .color(GPS)
+                    .radius(1.5)
+                    .shape(MarkerShape::Circle),
+            );
+            let Some(snap) = snap else {
+                return;
+            };
+            let in_outage = |t: f64| ride.outages.iter().any(|&(a, b)| t > a && t < b);
+            if colour_by_residual && !snap.residuals.is_empty() {
+                let res = &snap.residuals;
+                let bin = |i: usize| {
+                    let t = snap.path[i][0];
+                    let r =
+                        nearest(|k| res[k].t, res.len(), t).map_or(0.0, |k| res[k].horizontal());
+                    RESIDUAL_BINS.iter().position(|(b, _)| r < *b).unwrap_or(3)
+                };
+                for (b, run) in runs(&snap.path, bin) {
+                    let (bound, colour) = RESIDUAL_BINS[b];
+                    let name = if bound.is_finite() {
+                        format!("path, residual < {bound} m")
+                    } else {
+                        "path, residual >= 5 m".to_string()
+                    };
+                    plot.line(Line::new(name, run).color(colour).width(2.0));
+                }
+            } else {
+                for (outage, run) in runs(&snap.path, |i| in_outage(snap.path[i][0])) {
+                    let (name, colour) = if outage {
+                        ("path in GPS outage", OUTAGE)
+                    } else {
+                        ("reconstructed path", PATH)
+                    };
+                    plot.line(Line::new(name, run).color(colour).width(2.0));
+                }
+            }
+            if let Some(sigma) = &snap.sigma {
+                sigma_ellipses_ui(plot, snap, sigma);
+            }
+            if let Some(t) = hover_t
+                && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
+            {
+                let p = snap.path[i];
+                plot.points(
+                    Points::new(format!("t = {:.1} s", t - ride.t0), vec![[p[1], p[2]]])
+                        .color(Color32::WHITE)
+                        .radius(6.0)
+                        .shape(MarkerShape::Diamond),
+                );
+                if let Some(k) = nearest(|k| ride.fixes[k][0], ride.fixes.len(), t)
+                    && (ride.fixes[k][0] - t).abs() < 1.5
+                {
+                    let f = ride.fixes[k];
+                    plot.line(
+                        Line::new("residual at cursor", vec![[p[1], p[2]], [f[1], f[2]]])
+                            .color(Color32::WHITE)
+                            .style(LineStyle::dashed_dense()),
+                    );
+                }
+            }
+        });
+    scale_bar_ui(ui, &shown.transform);
+    if let Some(bg) = background {
+        attribution_ui(ui, &shown.transform, bg.status());
+    }
+}
+
+/// A scale bar's length for a map `width` metres wide (a 1-2-5 step of a
+/// fifth to a half of it) and its label; `None` for no width.
+pub fn scale_bar(width: f64) -> Option<(f64, String)> {
+    if !(width.is_finite() && width > 0.0) {
+        return None;
+    }
+    let length = nice_step(width / 5.0);
+    let label = if length >= 1000.0 {
+        format!("{} km", length / 1000.0)
+    } else {
+        format!("{length} m")
+    };
+    Some((length, label))
+}
+
+/// The scale bar in the map's lower left corner: the axes give the
+/// coordinates, the bar how far a distance on screen is at a glance. Painted
+/// on the screen over the plot, not as a plot item: an item would count in
+/// the plot's automatic bounds, and a bar placed by the last frame's bounds
+/// then pushes the next frame's out by a little every frame (on a 6-hour
+/// ride the map had crept out to 18,000 km).
+fn scale_bar_ui(ui: &egui::Ui, transform: &egui_plot::PlotTransform) {
+    let Some((length, label)) = scale_bar(transform.bounds().width()) else {
+        return;
+    };
+    let frame = *transform.frame();
+    let px = (length * transform.dpos_dvalue_x()).abs() as f32;
+    let start = egui::pos2(
+        frame.left() + 0.04 * frame.width(),
+        frame.bottom() - 0.05 * frame.height(),
+    );
+    let painter = ui.painter_at(frame);
+    painter.line_segment(
+        [start, start + egui::vec2(px, 0.0)],
+        egui::Stroke::new(4.0, SCALE),
+    );
+    painter.text(
+        start + egui::vec2(0.5 * px, -5.0),
+        egui::Align2::CENTER_BOTTOM,
+        label,
+        egui::FontId::proportional(11.0),
+        SCALE,
+    );
+}
+
+/// How many 95 % ellipses the map draws along the path.
+const ELLIPSES: usize = 80;
+
+/// The path's 95 % ellipses (chi-square 5.99 with 2 degrees of freedom) at
+/// evenly spaced points: where they grow (outages, the ride's ends) the path
+/// is least sure.
+fn sigma_ellipses_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView) {
+    let n = snap.path.len().min(sigma.path.len());
+    let step = n.div_ceil(ELLIPSES).max(1);
+    for i in (0..n).step_by(step) {
+        let [ve, vn, c] = sigma.path[i];
+        let Some(loop_) = ellipse(snap.path[i][1], snap.path[i][2], ve, vn, c, 5.991) else {
+            continue;
+        };
+        plot.line(Line::new("95 % ellipse", loop_).color(SIGMA).width(1.0));
+    }
+}
+
+/// The ellipse `d^T C^-1 d = k` around `(x, y)` for the covariance
+/// `C = [[ve, c], [c, vn]]`, as a closed loop; `None` if `C` is not positive.
+pub fn ellipse(x: f64, y: f64, ve: f64, vn: f64, c: f64, k: f64) -> Option<Vec<[f64; 2]>> {
+    // Eigen-decomposition of the symmetric 2x2 matrix.
+    let mean = 0.5 * (ve + vn);
+    let d = (0.25 * (ve - vn).powi(2) + c * c).sqrt();
+    let (l1, l2) = (mean + d, mean - d);
+    if !(l1.is_finite() && l2 > 0.0) {
+        return None;
+    }
+    let angle = 0.5 * (2.0 * c).atan2(ve - vn);
+    let (a, b) = ((k * l1).sqrt(), (k * l2).sqrt());
+    let (sin, cos) = angle.sin_cos();
+    Some(
+        (0..=32)
+            .map(|i| {
+                let t = i as f64 / 32.0 * std::f64::consts::TAU;
+                let (u, v) = (a * t.cos(), b * t.sin());
+                [x + u * cos - v * sin, y + u * sin + v * cos]
+            })
+            .collect(),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_scale_bar_is_a_round_fifth_of_the_map() {
+        assert_eq!(scale_bar(1000.0), Some((200.0, "200 m".to_string())));
+        assert_eq!(scale_bar(130.0), Some((50.0, "50 m".to_string())));
+        assert_eq!(scale_bar(12_000.0), Some((5000.0, "5 km".to_string())));
+        assert_eq!(scale_bar(3.0), Some((1.0, "1 m".to_string())));
+        for w in [0.7, 13.0, 480.0, 2.5e4] {
+            let (l, _) = scale_bar(w).unwrap();
+            assert!(l >= w / 5.0 && l <= 0.5 * w + 1e-9, "{w}: {l}");
+        }
+        assert_eq!(scale_bar(0.0), None);
+        assert_eq!(scale_bar(f64::NAN), None);
+    }
+
+    #[test]
+    fn ellipses_have_the_covariance_axes() {
+        // Axis-aligned: semi-axes 2 sqrt(k) east, sqrt(k) north.
+        let e = ellipse(10.0, 20.0, 4.0, 1.0, 0.0, 9.0).unwrap();
+        let max_e = e.iter().map(|p| (p[0] - 10.0).abs()).fold(0.0, f64::max);
+        let max_n = e.iter().map(|p| (p[1] - 20.0).abs()).fold(0.0, f64::max);
+        assert!(
+            (max_e - 6.0).abs() < 1e-9 && (max_n - 3.0).abs() < 0.05,
+            "{max_e} {max_n}"
+        );
+        // Correlated: every point satisfies d^T C^-1 d = k.
+        let (ve, vn, c) = (2.0, 1.0, 0.8);
+        for p in ellipse(0.0, 0.0, ve, vn, c, 5.991).unwrap() {
+            let det = ve * vn - c * c;
+            let m = (vn * p[0] * p[0] - 2.0 * c * p[0] * p[1] + ve * p[1] * p[1]) / det;
+            assert!((m - 5.991).abs() < 1e-9, "{m}");
+        }
+        assert!(ellipse(0.0, 0.0, 1.0, 1.0, 2.0, 1.0).is_none());
+    }
+}

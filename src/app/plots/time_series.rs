@@ -1,0 +1,181 @@
+//! The time plots (bias per segment, residuals at the fixes, in metres or
+//! in sigmas): one shared x axis and cursor (`link_axis` / `link_cursor`),
+//! and the hovered time reported so the map can mark it.
+
+use egui::Id;
+use egui_plot::{HLine, Legend, Line, LineStyle, Plot, VLine};
+
+use super::axes::{decimate, nice_grid, nice_grid_y, tick_label, view};
+use super::{AXES, OUTAGE};
+use crate::app::worker::{RideView, Snapshot};
+use crate::diagnosis::FixResidual;
+
+/// What hovering a time plot reported.
+pub struct TimeHover(pub Option<f64>);
+
+fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
+    Plot::new(id.to_string())
+        .height(height)
+        .legend(Legend::default())
+        .link_axis(time_group(), [true, false])
+        .link_cursor(time_group(), [true, false])
+        .x_axis_label("time (s)")
+        .y_axis_label(y_label.to_string())
+        .x_grid_spacer(nice_grid)
+        .y_grid_spacer(nice_grid_y)
+        .x_axis_formatter(tick_label)
+        .y_axis_formatter(tick_label)
+}
+
+fn time_group() -> Id {
+    Id::unique("gyropath-time-axis")
+}
+
+/// Total gyro bias (constant + segment), three axes, as steps over time.
+pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32) -> TimeHover {
+    let t0 = ride.t0;
+    let r = time_plot("bias", height, "bias (deg/s)").show(ui, |plot| {
+        let (lo, hi, px) = view(plot);
+        for (a, name) in ["x (roll)", "y (pitch)", "z (yaw)"].iter().enumerate() {
+            let pts: Vec<[f64; 2]> = snap
+                .segments
+                .iter()
+                .flat_map(|s| [[s.t0 - t0, s.bias_dps[a]], [s.t1 - t0, s.bias_dps[a]]])
+                .collect();
+            let pts = decimate(&pts, lo, hi, px);
+            plot.line(Line::new(format!("bias {name}"), pts).color(AXES[a]));
+            // +- 1 sigma of each segment, once the fit is done.
+            let Some(sigma) = snap
+                .sigma
+                .as_ref()
+                .filter(|s| s.segments.len() == snap.segments.len())
+            else {
+                continue;
+            };
+            for side in [-1.0, 1.0] {
+                let band: Vec<[f64; 2]> = snap
+                    .segments
+                    .iter()
+                    .zip(&sigma.segments)
+                    .flat_map(|(s, sd)| {
+                        let v = s.bias_dps[a] + side * sd[a];
+                        [[s.t0 - t0, v], [s.t1 - t0, v]]
+                    })
+                    .collect();
+                plot.line(
+                    Line::new(format!("bias {name} ± 1σ"), decimate(&band, lo, hi, px))
+                        .color(AXES[a].gamma_multiply(0.5))
+                        .style(LineStyle::dashed_dense()),
+                );
+            }
+        }
+        hovered_time(plot, t0)
+    });
+    TimeHover(r.inner)
+}
+
+/// Residuals at the GPS fixes: along-track, cross-track, vertical.
+pub fn residuals_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32) -> TimeHover {
+    let series: [ResidualSeries; 3] = [
+        ("along-track", &|r| Some(r.along)),
+        ("cross-track", &|r| Some(r.cross)),
+        ("vertical", &|r| r.up),
+    ];
+    fix_series_ui(
+        ui,
+        ride,
+        snap,
+        height,
+        "residuals",
+        "fix - path (m)",
+        &series,
+        None,
+    )
+}
+
+/// Residuals in sigmas of the fit's noise model (along- and cross-track),
+/// with the +-2 band that holds about 95 % of them under a right model.
+pub fn normalised_residuals_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: &Snapshot,
+    height: f32,
+) -> TimeHover {
+    let series: [ResidualSeries; 2] = [
+        ("along-track", &|r| Some(r.normalised[0])),
+        ("cross-track", &|r| Some(r.normalised[1])),
+    ];
+    fix_series_ui(
+        ui,
+        ride,
+        snap,
+        height,
+        "normalised residuals",
+        "(fix - path) / sigma",
+        &series,
+        Some(2.0),
+    )
+}
+
+/// A named quantity of each fix residual (`None`: the fix has none).
+type ResidualSeries<'a> = (&'a str, &'a dyn Fn(&FixResidual) -> Option<f64>);
+
+/// Quantities of the fix residuals over time, one line per stretch of
+/// consecutive fixes so outages stay gaps, coloured as the axes are, with
+/// horizontal lines at `+-band` when given.
+#[allow(clippy::too_many_arguments)]
+fn fix_series_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    snap: &Snapshot,
+    height: f32,
+    id: &str,
+    y_label: &str,
+    series: &[ResidualSeries],
+    band: Option<f64>,
+) -> TimeHover {
+    let t0 = ride.t0;
+    let r = time_plot(id, height, y_label).show(ui, |plot| {
+        let res = &snap.residuals;
+        let (lo, hi, px) = view(plot);
+        let mut start = 0;
+        while start < res.len() {
+            let end = (start + 1..res.len())
+                .find(|&k| res[k].t - res[k - 1].t > 2.5)
+                .unwrap_or(res.len());
+            for (i, (name, f)) in series.iter().enumerate() {
+                let pts: Vec<[f64; 2]> = res[start..end]
+                    .iter()
+                    .filter_map(|r| f(r).map(|v| [r.t - t0, v]))
+                    .collect();
+                if !pts.is_empty() {
+                    plot.line(Line::new(*name, decimate(&pts, lo, hi, px)).color(AXES[i]));
+                }
+            }
+            start = end;
+        }
+        if let Some(b) = band {
+            for y in [-b, b] {
+                plot.hline(
+                    HLine::new(format!("±{b} σ"), y)
+                        .color(egui::Color32::GRAY)
+                        .style(LineStyle::dashed_loose()),
+                );
+            }
+        }
+        for &(a, b) in &ride.outages {
+            plot.vline(VLine::new("GPS outage", a - t0).color(OUTAGE));
+            plot.vline(VLine::new("GPS outage", b - t0).color(OUTAGE));
+        }
+        hovered_time(plot, t0)
+    });
+    TimeHover(r.inner)
+}
+
+fn hovered_time(plot: &egui_plot::PlotUi<'_>, t0: f64) -> Option<f64> {
+    if plot.response().hovered() {
+        plot.pointer_coordinate().map(|p| p.x + t0)
+    } else {
+        None
+    }
+}
