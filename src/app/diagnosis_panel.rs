@@ -60,11 +60,15 @@ impl GyropathApp {
         egui::ScrollArea::vertical()
             .id_salt("diagnosis-scroll")
             .show(ui, |ui| {
+                // The estimates go under each effect's name, wrapped to what
+                // is left of the panel: as a column of their own they ran
+                // off its right edge, where a narrow panel hid them.
+                let name_w = (ui.available_width() - 200.0).max(160.0);
                 egui::Grid::new("ranking")
-                    .num_columns(5)
+                    .num_columns(4)
                     .striped(true)
                     .show(ui, |ui| {
-                        for h in ["", "effect", "held-out (m)", "drop", "estimate"] {
+                        for h in ["", "effect (estimate)", "held-out", "drop (t)"] {
                             ui.strong(h);
                         }
                         ui.end_row();
@@ -80,31 +84,41 @@ impl GyropathApp {
                             {
                                 commands.push(Command::AddEffect(c.effect.clone()));
                             }
-                            let label = if c.significant {
-                                egui::RichText::new(&c.effect)
+                            let name = if c.significant {
+                                egui::RichText::new(format!("{} (significant)", c.effect))
                                     .strong()
                                     .color(egui::Color32::from_rgb(120, 220, 120))
                             } else {
                                 egui::RichText::new(&c.effect)
                             };
-                            ui.label(label).on_hover_text(&c.explanation);
-                            if let Some(e) = &c.error {
-                                ui.label("-");
-                                ui.label("-");
-                                ui.label(e);
-                            } else {
-                                ui.label(format!("{:.3}", c.heldout_rms_m));
-                                ui.label(format!(
-                                    "{:+.1} %{}",
-                                    100.0 * c.drop,
-                                    if c.significant { " significant" } else { "" }
-                                ));
-                                let est: Vec<String> = c
+                            let detail = match &c.error {
+                                Some(e) => e.clone(),
+                                None => c
                                     .estimate
                                     .iter()
                                     .map(|(k, e)| format!("{k} {}", e.describe()))
-                                    .collect();
-                                ui.label(est.join(", ")).on_hover_text(&c.explanation);
+                                    .collect::<Vec<_>>()
+                                    .join(", "),
+                            };
+                            ui.vertical(|ui| {
+                                ui.set_max_width(name_w);
+                                ui.label(name).on_hover_text(&c.explanation);
+                                if !detail.is_empty() {
+                                    ui.add(
+                                        egui::Label::new(egui::RichText::new(detail).small().weak())
+                                            .wrap(),
+                                    );
+                                }
+                            });
+                            if c.error.is_some() {
+                                ui.label("-");
+                                ui.label("-");
+                            } else {
+                                ui.label(format!("{:.3} m", c.heldout_rms_m));
+                                ui.label(format!("{:+.1} % ({:.1})", 100.0 * c.drop, c.t_statistic))
+                                .on_hover_text(
+                                    "drop: how much lower the held-out error is; t: how consistent the gain is across the validation blocks (significant: drop at least 2 % and t at least 3, or at least 10 % and 1.5)",
+                                );
                             }
                             ui.end_row();
                         }

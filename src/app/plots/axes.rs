@@ -61,6 +61,44 @@ fn nice_grid_spaced(input: GridInput, label_spacings: f64) -> Vec<GridMark> {
     marks
 }
 
+/// Grid marks for an axis in decades (`log10` of the value): one at every
+/// decade, labelled every 1, 2, 5 or 10 decades, whichever keeps labels
+/// about four grid spacings apart. The default grid is base-10 in the
+/// axis's own units, so it labelled decades 0 and 10 only (1e0 and 1e10):
+/// a short plot spanning six decades showed one label.
+pub fn decade_grid(input: GridInput) -> Vec<GridMark> {
+    if !(input.base_step_size.is_finite() && input.base_step_size > 0.0) {
+        return Vec::new();
+    }
+    let label = nice_step((4.0 * input.base_step_size).max(1.0));
+    let (lo, hi) = input.bounds;
+    let (first, last) = (lo.ceil() as i64, hi.floor() as i64);
+    if last - first > 10_000 {
+        return Vec::new();
+    }
+    (first..=last)
+        .map(|k| {
+            let value = k as f64;
+            let labelled = (value / label).round() * label == value;
+            GridMark {
+                value,
+                step_size: if labelled { label } else { 1.0 },
+            }
+        })
+        .collect()
+}
+
+/// The label of a decade mark: the value `10^mark` plainly from 0.001 to
+/// 10,000 ("0.01", "100"), in powers of ten beyond ("1e6").
+pub fn decade_label(mark: GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
+    let k = mark.value.round() as i32;
+    if (-3..=4).contains(&k) {
+        format!("{}", 10f64.powi(k))
+    } else {
+        format!("1e{k}")
+    }
+}
+
 /// A tick label with as many decimals as its 1-2-5 step needs (egui_plot's
 /// default rounds `-log10(step)`, which gives 0.5 no decimal: "-0").
 pub fn tick_label(mark: GridMark, _range: &std::ops::RangeInclusive<f64>) -> String {
@@ -236,6 +274,39 @@ mod tests {
         assert_eq!(tick_label(mark(-1e-17, 0.2), &(0.0..=1.0)), "0");
         assert_eq!(nice_step(2.0), 2.0);
         assert_eq!(nice_step(7.0), 10.0);
+    }
+
+    #[test]
+    fn decades_are_marked_one_by_one_and_labelled_plainly() {
+        // Six decades on a short axis: a mark per decade, labels two apart.
+        let marks = decade_grid(GridInput {
+            bounds: (-0.3, 6.2),
+            base_step_size: 0.4,
+        });
+        let values: Vec<f64> = marks.iter().map(|m| m.value).collect();
+        assert_eq!(values, vec![0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0]);
+        let labelled: Vec<f64> = marks
+            .iter()
+            .filter(|m| m.step_size > 1.0)
+            .map(|m| m.value)
+            .collect();
+        assert_eq!(labelled, vec![0.0, 2.0, 4.0, 6.0]);
+        // Room for every label: every decade carries one.
+        let tall = decade_grid(GridInput {
+            bounds: (-1.5, 2.5),
+            base_step_size: 0.1,
+        });
+        assert_eq!(tall.len(), 4);
+        assert!(tall.iter().all(|m| m.step_size == 1.0));
+        let mark = |value: f64| GridMark {
+            value,
+            step_size: 1.0,
+        };
+        assert_eq!(decade_label(mark(0.0), &(0.0..=1.0)), "1");
+        assert_eq!(decade_label(mark(-2.0), &(0.0..=1.0)), "0.01");
+        assert_eq!(decade_label(mark(3.0), &(0.0..=1.0)), "1000");
+        assert_eq!(decade_label(mark(6.0), &(0.0..=1.0)), "1e6");
+        assert_eq!(decade_label(mark(-5.0), &(0.0..=1.0)), "1e-5");
     }
 
     #[test]

@@ -134,6 +134,12 @@ fn scale_bar_ui(ui: &egui::Ui, transform: &egui_plot::PlotTransform) {
         frame.bottom() - 0.05 * frame.height(),
     );
     let painter = ui.painter_at(frame);
+    // A dark backing, so the bar and its label stay legible over the path.
+    let backing = egui::Rect::from_min_max(
+        start + egui::vec2(-6.0, -22.0),
+        start + egui::vec2(px + 6.0, 6.0),
+    );
+    painter.rect_filled(backing, 3.0, Color32::from_black_alpha(150));
     painter.line_segment(
         [start, start + egui::vec2(px, 0.0)],
         egui::Stroke::new(4.0, SCALE),

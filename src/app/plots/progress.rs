@@ -3,7 +3,7 @@
 use egui::Color32;
 use egui_plot::{Legend, Line, LineStyle, Plot, PlotPoints, VLine};
 
-use super::axes::{nice_grid, tick_label};
+use super::axes::{decade_grid, decade_label, nice_grid, tick_label};
 use super::{GPS, PATH};
 use crate::app::worker::Snapshot;
 use crate::optimisation::IterationReport;
@@ -41,7 +41,8 @@ pub fn cost_ui(ui: &mut egui::Ui, snap: &Snapshot, height: f32) {
         .x_axis_label("iteration")
         .x_grid_spacer(nice_grid)
         .x_axis_formatter(tick_label)
-        .y_axis_formatter(|mark, _| format!("{:.0e}", 10f64.powf(mark.value)))
+        .y_grid_spacer(decade_grid)
+        .y_axis_formatter(decade_label)
         .include_y(if hi.is_finite() { hi + headroom } else { 1.0 })
         .show(ui, |plot| {
             plot.line(
