@@ -1,13 +1,14 @@
 //! How often the truth lies inside the path's 95 % sigma ellipse, on
 //! simulated rides, under the noise settings estimated from the ride and
-//! under settings given by hand.
+//! under settings given by hand; and how often the true GPS sigma and
+//! correlation time (1.5 m, 60 s) lie inside the 1-sigma ranges estimated.
 //!
 //! `cargo run --release --example calibration -- [duration_s] [seeds...]`
 
 use std::sync::Arc;
 
 use gyropath::import::parse;
-use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
+use gyropath::optimisation::{AutoNoise, Estimated, FitSettings, Limit, Reconstruction};
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, simulate};
 
@@ -30,6 +31,8 @@ fn main() -> anyhow::Result<()> {
     ];
     for (label, noise) in cases {
         let (mut inside, mut total) = (0usize, 0usize);
+        // z = ln(estimate / truth) / sd per searched setting (sigma, tau).
+        let mut z: [Vec<f64>; 2] = [Vec::new(), Vec::new()];
         for &seed in &seeds {
             let sim = simulate(&SimConfig {
                 seed,
@@ -70,6 +73,16 @@ fn main() -> anyhow::Result<()> {
             }
             inside += here;
             total += rows;
+            if let Some(n) = fit.noise() {
+                for (k, (e, truth)) in [(&n.gps_sigma_m, 1.5), (&n.gps_tau_s, 60.0)]
+                    .into_iter()
+                    .enumerate()
+                {
+                    if let Some(v) = z_score(e, truth) {
+                        z[k].push(v);
+                    }
+                }
+            }
             let tenths: Vec<String> = by_tenth
                 .iter()
                 .map(|(a, b)| format!("{:.0}", 100.0 * *a as f64 / (*b).max(1) as f64))
@@ -87,6 +100,34 @@ fn main() -> anyhow::Result<()> {
             "{label:>22}: {:.1} % of {total} rows inside the 95 % ellipse",
             100.0 * inside as f64 / total.max(1) as f64
         );
+        for (name, z) in ["GPS sigma", "GPS correlation time"].iter().zip(&z) {
+            if z.is_empty() {
+                continue;
+            }
+            let rms = (z.iter().map(|v| v * v).sum::<f64>() / z.len() as f64).sqrt();
+            let within = z.iter().filter(|v| v.abs() <= 1.0).count();
+            println!(
+                "{:>22}  {name}: truth within the 1-sigma range on {within} of {} rides (68 % expected), RMS z {rms:.2} (1 if calibrated), mean z {:+.2}",
+                "",
+                z.len(),
+                z.iter().sum::<f64>() / z.len() as f64
+            );
+        }
     }
     Ok(())
+}
+
+/// `ln(estimate / truth)` in units of the estimate's log-range on the
+/// truth's side; `None` for a setting held at a bound or not searched.
+fn z_score(e: &Estimated, truth: f64) -> Option<f64> {
+    if !e.estimated || e.limit != Limit::None {
+        return None;
+    }
+    let d = (e.value / truth).ln();
+    let sd = if d > 0.0 {
+        (e.value / e.low).ln()
+    } else {
+        (e.high / e.value).ln()
+    };
+    (sd > 0.0).then(|| d / sd)
 }

@@ -655,7 +655,8 @@ const NEWTON_GAIN: f64 = 0.2;
 /// coordinate, tried at 1, 2 and 4 times its length side by side, and at
 /// a half and a quarter if none of those lowers `f`. It stops after a step
 /// below [`NEWTON_DONE`] that gains less than [`NEWTON_GAIN`]. The last
-/// stencil's `H` is the curvature the ranges need: a Nelder-Mead search
+/// stencil, with its cross terms made second-order
+/// ([`Stencil::symmetric_hessian`]), gives the ranges: a Nelder-Mead search
 /// followed by a central-difference Hessian took 81 likelihoods on a
 /// 30-minute ride with three settings and 145 with four; this takes 39 with
 /// three, in fewer rounds.
@@ -672,6 +673,7 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
     let mut value = if x == x0 { f0 } else { f.at(&x) };
     let mut limit = vec![Limit::None; n];
     let mut sd = vec![f64::INFINITY; n];
+    let mut last: Option<Stencil> = None;
     for _ in 0..max_iter {
         let free: Vec<usize> = (0..n).filter(|&d| limit[d] == Limit::None).collect();
         let m = free.len();
@@ -715,9 +717,13 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
         if !(gradient.iter().all(|g| g.is_finite()) && hess.iter().all(|v| v.is_finite())) {
             break;
         }
-        for (i, s) in sd_of(&hess).into_iter().enumerate() {
-            sd[free[i]] = s;
-        }
+        last = Some(Stencil {
+            centre: x.clone(),
+            value,
+            free: free.clone(),
+            values: values.clone(),
+            hess: hess.clone(),
+        });
         let eigen = hess.clone().symmetric_eigen();
         let top = eigen.eigenvalues.amax();
         let floor = (1e-3 * top).max(0.5);
@@ -791,6 +797,12 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
             _ => break,
         }
     }
+    if let Some(stencil) = last {
+        let hess = stencil.symmetric_hessian(&f, h);
+        for (i, s) in sd_of(&hess).into_iter().enumerate() {
+            sd[stencil.free[i]] = s;
+        }
+    }
     Found {
         x,
         value,
@@ -799,28 +811,88 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
     }
 }
 
-/// `sqrt(diag(2 H^-1))` of a Hessian of `-2 ln L`; where it is not positive
-/// definite, each from its own curvature (infinite where there is none).
+/// The last finite-difference stencil of a [`newton`] search: its centre,
+/// `f` there, the coordinates it moved, its values (`f_i+`, `f_i-` per
+/// coordinate, then `f_ij++` per pair) and the Hessian they gave.
+struct Stencil {
+    centre: Vec<f64>,
+    value: f64,
+    free: Vec<usize>,
+    values: Vec<f64>,
+    hess: DMatrix<f64>,
+}
+
+impl Stencil {
+    /// The Hessian with second-order cross terms, for the ranges: with the
+    /// `f_ij--` points added (`m(m-1)/2` evaluations, once),
+    /// `H_ij = (f_ij++ + f_ij-- - f_i+ - f_i- - f_j+ - f_j- + 2 f) / (2 h^2)`
+    /// (error `O(h^2)`; the search's forward cross term
+    /// `(f_ij++ - f_i+ - f_j+ + f) / h^2` is off by `O(h)` third
+    /// derivatives). Along a narrow ridge that error decides the ranges: on a
+    /// 6-hour ride the GPS sigma and correlation time lie on the ridge
+    /// `sigma^2 / tau`, the forward cross term made the Hessian indefinite,
+    /// and the ranges fell back to each setting's curvature with the others
+    /// held: 2.54-2.59 m where the likelihood allows about 2.4-2.7 m.
+    fn symmetric_hessian(&self, f: &Objective, h: f64) -> DMatrix<f64> {
+        let m = self.free.len();
+        let mut points = Vec::with_capacity(m * (m - 1) / 2);
+        for i in 0..m {
+            for j in 0..i {
+                let mut y = self.centre.clone();
+                y[self.free[i]] -= h;
+                y[self.free[j]] -= h;
+                points.push(y);
+            }
+        }
+        let minus_minus = f.values(&points);
+        // f_i+ + f_i- per coordinate.
+        let both = |i: usize| self.values[2 * i] + self.values[2 * i + 1];
+        let mut hess = self.hess.clone();
+        let mut k = 0;
+        for i in 0..m {
+            for j in 0..i {
+                let v = (self.values[2 * m + k] + minus_minus[k] - both(i) - both(j)
+                    + 2.0 * self.value)
+                    / (2.0 * h * h);
+                if v.is_finite() {
+                    hess[(i, j)] = v;
+                    hess[(j, i)] = v;
+                }
+                k += 1;
+            }
+        }
+        hess
+    }
+}
+
+/// `sqrt(diag(2 H^-1))` of a Hessian of `-2 ln L`. Where `H` is not
+/// positive definite its eigenvalues are floored at a millionth of the
+/// largest: a setting that loads on a direction the likelihood does not curve
+/// up along gets a range as wide as that direction allows (in effect
+/// unbounded), never the narrow curvature of that setting alone with the
+/// others held, which along a ridge is far too sure.
 fn sd_of(hess: &DMatrix<f64>) -> Vec<f64> {
     let n = hess.nrows();
-    match hess.clone().cholesky() {
-        Some(ch) => {
-            let inv = ch.inverse();
-            (0..n)
-                .map(|i| (2.0 * inv[(i, i)]).max(0.0).sqrt())
-                .collect()
-        }
-        None => (0..n)
-            .map(|i| {
-                let c = hess[(i, i)];
-                if c > 0.0 {
-                    (2.0 / c).sqrt()
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect(),
+    if let Some(ch) = hess.clone().cholesky() {
+        let inv = ch.inverse();
+        return (0..n)
+            .map(|i| (2.0 * inv[(i, i)]).max(0.0).sqrt())
+            .collect();
     }
+    let eigen = hess.clone().symmetric_eigen();
+    let top = eigen.eigenvalues.amax();
+    if !(top.is_finite() && top > 0.0) {
+        return vec![f64::INFINITY; n];
+    }
+    let floor = 1e-6 * top;
+    (0..n)
+        .map(|i| {
+            let var: f64 = (0..n)
+                .map(|k| eigen.eigenvectors[(i, k)].powi(2) / eigen.eigenvalues[k].max(floor))
+                .sum();
+            (2.0 * var).sqrt()
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -903,6 +975,42 @@ mod tests {
             found.sd.iter().all(|s| (s - 2f64.sqrt()).abs() < 0.05),
             "{:?}",
             found.sd
+        );
+    }
+
+    #[test]
+    fn ranges_along_a_narrow_ridge_are_its_marginals() {
+        // -2 ln L narrow across the ridge (u, sd 0.03) and wide along it (v,
+        // sd 0.5), with a cubic term across it, as the GPS sigma and
+        // correlation time show on a long ride: the stencil's forward cross
+        // term made this Hessian indefinite and gave y0 a range of 0.03.
+        let (su, sv) = (0.03f64, 0.5f64);
+        let r = 1.25f64.sqrt();
+        let f = move |y: &[f64]| {
+            let u = (y[0] - 0.5 * y[1]) / r;
+            let v = (0.5 * y[0] + y[1]) / r;
+            (u / su).powi(2) + (v / sv).powi(2) + 1500.0 * u.powi(3)
+        };
+        let objective = Objective {
+            f: &f,
+            side_by_side: true,
+        };
+        let start = [0.02, 0.05];
+        let found = newton(objective, &start, f(&start), &[(-0.3, 0.3); 2], 8);
+        // Marginal covariance su^2 u u^T + sv^2 v v^T.
+        let want = [
+            (su * su * 0.8 + sv * sv * 0.2).sqrt(),
+            (su * su * 0.2 + sv * sv * 0.8).sqrt(),
+        ];
+        for (sd, want) in found.sd.iter().zip(want) {
+            assert!((sd / want - 1.0).abs() < 0.25, "{:?} vs {want:?}", found.sd);
+        }
+        // Where the curvature is lost, a range as wide as the lost direction.
+        let indefinite = DMatrix::from_row_slice(2, 2, &[100.0, 0.0, 0.0, -1.0]);
+        let sd = sd_of(&indefinite);
+        assert!(
+            (sd[0] - 0.02f64.sqrt()).abs() < 1e-9 && sd[1] > 10.0,
+            "{sd:?}"
         );
     }
 
