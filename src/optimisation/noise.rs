@@ -35,7 +35,9 @@
 //! as a smaller wander) and the path's ellipses held the truth at 83 % of the
 //! rows instead of 89 % with the ratio right. The
 //! uncertainty of each setting is the curvature of `-2 ln L` in its
-//! logarithm (`sd(ln phi) = sqrt(2 / f'')`, the inverse of the Hessian).
+//! logarithm (`sd(ln phi) = sqrt(2 / f'')`, the inverse of the Hessian),
+//! and along a direction it hardly curves (a ridge) how far `-2 ln L` lets
+//! it go before rising by 1.
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 
@@ -448,10 +450,11 @@ pub fn estimate(
     let x = with(x0, &dims, &found.x);
     let value = found.value;
     let mut limit = [Limit::None; SETTINGS];
-    let mut sd = [f64::INFINITY; SETTINGS];
+    let (mut below, mut above) = ([f64::INFINITY; SETTINGS], [f64::INFINITY; SETTINGS]);
     for (i, &d) in dims.iter().enumerate() {
         limit[d] = found.limit[i];
-        sd[d] = found.sd[i];
+        below[d] = found.below[i];
+        above[d] = found.above[i];
     }
     let inner: Vec<usize> = dims
         .iter()
@@ -497,10 +500,7 @@ pub fn estimate(
         }
         let (lo, hi) = (bounds[d].0.ln(), bounds[d].1.ln());
         let (low, high) = match limit[d] {
-            Limit::None => {
-                let s = sd[d].min(5.0);
-                (x[d] - s, x[d] + s)
-            }
+            Limit::None => (x[d] - below[d].min(5.0), x[d] + above[d].min(5.0)),
             Limit::AtLeast => ((x[d] - reach[d]).max(lo), x[d]),
             Limit::AtMost => (x[d], (x[d] + reach[d]).min(hi)),
         };
@@ -536,19 +536,33 @@ fn with(x: [f64; SETTINGS], dims: &[usize], y: &[f64]) -> [f64; SETTINGS] {
 /// Steps (in the logarithm) at which [`one_sided`] looks for the edge of the range.
 const ONE_SIDED_STEPS: [f64; 4] = [0.35, 0.7, 1.4, 2.8];
 
+/// Halvings of the bracket [`one_sided`] found, before it interpolates.
+const ONE_SIDED_HALVINGS: usize = 3;
+
 /// How far `t >= 0` goes before `f(t)` rises by 1 above `f0 = f(0)` (the
-/// 1-sigma edge of `-2 ln L`), interpolated between [`ONE_SIDED_STEPS`];
-/// infinite if it does not rise that much within them.
+/// 1-sigma edge of `-2 ln L`): bracketed by [`ONE_SIDED_STEPS`] (side by
+/// side), the bracket halved [`ONE_SIDED_HALVINGS`] times, then
+/// interpolated; infinite if it does not rise that much within the steps.
 fn one_sided(f: Objective, f0: f64) -> f64 {
     let points: Vec<Vec<f64>> = ONE_SIDED_STEPS.iter().map(|&t| vec![t]).collect();
     let values = f.values(&points);
-    let (mut t_prev, mut rise_prev) = (0.0, 0.0);
+    let (mut lo, mut rise_lo) = (0.0, 0.0);
     for (&t, v) in ONE_SIDED_STEPS.iter().zip(values) {
         let rise = v - f0;
         if rise >= 1.0 {
-            return t_prev + (t - t_prev) * (1.0 - rise_prev) / (rise - rise_prev);
+            let (mut hi, mut rise_hi) = (t, rise);
+            for _ in 0..ONE_SIDED_HALVINGS {
+                let mid = 0.5 * (lo + hi);
+                let r = f.at(&[mid]) - f0;
+                if r >= 1.0 {
+                    (hi, rise_hi) = (mid, r);
+                } else {
+                    (lo, rise_lo) = (mid, r.max(rise_lo));
+                }
+            }
+            return lo + (hi - lo) * (1.0 - rise_lo) / (rise_hi - rise_lo);
         }
-        (t_prev, rise_prev) = (t, rise.max(rise_prev));
+        (lo, rise_lo) = (t, rise.max(rise_lo));
     }
     f64::INFINITY
 }
@@ -619,14 +633,16 @@ impl Objective<'_> {
 
 /// Where a [`newton`] search ended: the minimum `x` (a coordinate the
 /// likelihood pushed against a bound held there, `limit` saying which side),
-/// `f` there, and the log-settings' standard deviations (`sqrt(diag(2 H^-1))`
-/// over the coordinates not at a bound; infinite where the likelihood does
-/// not curve, unused at a bound).
+/// `f` there, and how far below and above `x` each log-setting's 1-sigma
+/// range reaches (see [`Stencil::ranges`]; infinite where the likelihood
+/// does not rise, unused at a bound).
+#[derive(Debug)]
 struct Found {
     x: Vec<f64>,
     value: f64,
     limit: Vec<Limit>,
-    sd: Vec<f64>,
+    below: Vec<f64>,
+    above: Vec<f64>,
 }
 
 /// Largest move (in the logarithm of a setting) of one Newton step: a
@@ -672,7 +688,7 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
     let mut x: Vec<f64> = (0..n).map(|d| inside(d, x0[d])).collect();
     let mut value = if x == x0 { f0 } else { f.at(&x) };
     let mut limit = vec![Limit::None; n];
-    let mut sd = vec![f64::INFINITY; n];
+    let (mut below, mut above) = (vec![f64::INFINITY; n], vec![f64::INFINITY; n]);
     let mut last: Option<Stencil> = None;
     for _ in 0..max_iter {
         let free: Vec<usize> = (0..n).filter(|&d| limit[d] == Limit::None).collect();
@@ -799,15 +815,17 @@ fn newton(f: Objective, x0: &[f64], f0: f64, bounds: &[(f64, f64)], max_iter: us
     }
     if let Some(stencil) = last {
         let hess = stencil.symmetric_hessian(&f, h);
-        for (i, s) in sd_of(&hess).into_iter().enumerate() {
-            sd[stencil.free[i]] = s;
+        for (i, (b, a)) in stencil.ranges(&f, &hess).into_iter().enumerate() {
+            below[stencil.free[i]] = b;
+            above[stencil.free[i]] = a;
         }
     }
     Found {
         x,
         value,
         limit,
-        sd,
+        below,
+        above,
     }
 }
 
@@ -863,37 +881,73 @@ impl Stencil {
         }
         hess
     }
+
+    /// How far below and above the centre each coordinate's 1-sigma range
+    /// reaches, from `hess` (of `-2 ln L`): along each eigen-direction that
+    /// curves well (`lambda >=` [`WEAK_CURVATURE`]) the quadratic
+    /// `sqrt(diag(2 H^-1))` share; along a weak one, where the quadratic
+    /// model is no guide (a ridge such as `sigma^2 / tau`, flat until a bound
+    /// or until the data object), the distance `t` each way at which `f`
+    /// rises by 1 ([`one_sided`], walls at the bounds included), projected
+    /// onto each coordinate. The shares add in quadrature. A weak direction
+    /// read quadratically, with its eigenvalue floored, gave the Husky robot
+    /// a GPS sigma of 0.02-477 m; read as each setting's own curvature with
+    /// the others held, a range far too narrow along a ridge.
+    fn ranges(&self, f: &Objective, hess: &DMatrix<f64>) -> Vec<(f64, f64)> {
+        let m = self.free.len();
+        let eigen = hess.clone().symmetric_eigen();
+        let mut var = vec![0.0; m];
+        let (mut below, mut above) = (vec![0.0f64; m], vec![0.0f64; m]);
+        for k in 0..m {
+            let v: Vec<f64> = eigen.eigenvectors.column(k).iter().copied().collect();
+            let lambda = eigen.eigenvalues[k];
+            if lambda >= WEAK_CURVATURE {
+                for i in 0..m {
+                    var[i] += 2.0 * v[i] * v[i] / lambda;
+                }
+                continue;
+            }
+            for sign in [1.0, -1.0] {
+                let along = |t: &[f64]| {
+                    let mut y = self.centre.clone();
+                    for i in 0..m {
+                        y[self.free[i]] += sign * t[0] * v[i];
+                    }
+                    (f.f)(&y)
+                };
+                let t = one_sided(
+                    Objective {
+                        f: &along,
+                        side_by_side: f.side_by_side,
+                    },
+                    self.value,
+                );
+                for i in 0..m {
+                    let reach = sign * v[i];
+                    if reach > 1e-3 {
+                        above[i] = above[i].max(t * reach);
+                    } else if reach < -1e-3 {
+                        below[i] = below[i].max(-t * reach);
+                    }
+                }
+            }
+        }
+        (0..m)
+            .map(|i| {
+                (
+                    (var[i] + below[i] * below[i]).sqrt(),
+                    (var[i] + above[i] * above[i]).sqrt(),
+                )
+            })
+            .collect()
+    }
 }
 
-/// `sqrt(diag(2 H^-1))` of a Hessian of `-2 ln L`. Where `H` is not
-/// positive definite its eigenvalues are floored at a millionth of the
-/// largest: a setting that loads on a direction the likelihood does not curve
-/// up along gets a range as wide as that direction allows (in effect
-/// unbounded), never the narrow curvature of that setting alone with the
-/// others held, which along a ridge is far too sure.
-fn sd_of(hess: &DMatrix<f64>) -> Vec<f64> {
-    let n = hess.nrows();
-    if let Some(ch) = hess.clone().cholesky() {
-        let inv = ch.inverse();
-        return (0..n)
-            .map(|i| (2.0 * inv[(i, i)]).max(0.0).sqrt())
-            .collect();
-    }
-    let eigen = hess.clone().symmetric_eigen();
-    let top = eigen.eigenvalues.amax();
-    if !(top.is_finite() && top > 0.0) {
-        return vec![f64::INFINITY; n];
-    }
-    let floor = 1e-6 * top;
-    (0..n)
-        .map(|i| {
-            let var: f64 = (0..n)
-                .map(|k| eigen.eigenvectors[(i, k)].powi(2) / eigen.eigenvalues[k].max(floor))
-                .sum();
-            (2.0 * var).sqrt()
-        })
-        .collect()
-}
+/// Curvature of `-2 ln L` (per log-unit squared) below which a direction is
+/// scanned rather than read quadratically: a 1-sigma half-width of more than
+/// one log-unit (a factor of e), where a quadratic fitted over the stencil's
+/// 0.15 says little.
+const WEAK_CURVATURE: f64 = 2.0;
 
 #[cfg(test)]
 mod tests {
@@ -927,8 +981,11 @@ mod tests {
             assert_eq!(found.limit, vec![Limit::None; 2]);
             // Covariance A^-1 = 1 / 11 [[6, -1], [-1, 2]].
             let want = [(6.0f64 / 11.0).sqrt(), (2.0f64 / 11.0).sqrt()];
-            for (sd, want) in found.sd.iter().zip(want) {
-                assert!((sd - want).abs() < 1e-6, "{sd} vs {want}");
+            for ((b, a), want) in found.below.iter().zip(&found.above).zip(want) {
+                assert!(
+                    (b - want).abs() < 1e-6 && (a - want).abs() < 1e-6,
+                    "{b} {a} vs {want}"
+                );
             }
         }
     }
@@ -947,7 +1004,10 @@ mod tests {
         assert_eq!(found.x[1], -0.5);
         assert!((found.x[0] - 0.25).abs() < 1e-3, "{:?}", found.x);
         // With x1 held, x0's curvature alone: H_00 = 4, sd sqrt(2 / 4).
-        assert!((found.sd[0] - 0.5f64.sqrt()).abs() < 1e-6, "{:?}", found.sd);
+        assert!(
+            (found.below[0] - 0.5f64.sqrt()).abs() < 1e-6 && found.below[0] == found.above[0],
+            "{found:?}"
+        );
     }
 
     #[test]
@@ -970,12 +1030,15 @@ mod tests {
             "{:?}",
             found.x
         );
-        // Curvature 1 at the minimum: sd sqrt(2).
-        assert!(
-            found.sd.iter().all(|s| (s - 2f64.sqrt()).abs() < 0.05),
-            "{:?}",
-            found.sd
-        );
+        // Curvature 1 at the minimum (a quadratic's sd sqrt(2)), but not
+        // quadratic: f - f_min = e^-u + u - 1 rises by 1 at u = -1.146 and
+        // u = 1.841, and the range is where it does.
+        for i in 0..2 {
+            assert!(
+                (found.below[i] - 1.146).abs() < 0.08 && (found.above[i] - 1.841).abs() < 0.08,
+                "{found:?}"
+            );
+        }
     }
 
     #[test]
@@ -1002,16 +1065,35 @@ mod tests {
             (su * su * 0.8 + sv * sv * 0.2).sqrt(),
             (su * su * 0.2 + sv * sv * 0.8).sqrt(),
         ];
-        for (sd, want) in found.sd.iter().zip(want) {
-            assert!((sd / want - 1.0).abs() < 0.25, "{:?} vs {want:?}", found.sd);
+        for (i, want) in want.into_iter().enumerate() {
+            for sd in [found.below[i], found.above[i]] {
+                assert!((sd / want - 1.0).abs() < 0.25, "{found:?} vs {want}");
+            }
         }
-        // Where the curvature is lost, a range as wide as the lost direction.
-        let indefinite = DMatrix::from_row_slice(2, 2, &[100.0, 0.0, 0.0, -1.0]);
-        let sd = sd_of(&indefinite);
-        assert!(
-            (sd[0] - 0.02f64.sqrt()).abs() < 1e-9 && sd[1] > 10.0,
-            "{sd:?}"
+    }
+
+    #[test]
+    fn a_flat_ridge_reaches_as_far_as_the_likelihood_allows() {
+        // Narrow across y0 = y1, flat along it between walls at 0.5 and -1
+        // (a ridge that runs to a bound): a quadratic reading has no
+        // curvature along it; the scan finds the walls.
+        let wall = |y: f64| 1e3 * ((y - 0.5).max(0.0) + (-1.0 - y).max(0.0));
+        let f = |y: &[f64]| ((y[0] - y[1]) / 0.05).powi(2) + wall(y[0]) + wall(y[1]);
+        let objective = Objective {
+            f: &f,
+            side_by_side: false,
+        };
+        let found = newton(
+            objective,
+            &[0.0, 0.02],
+            f(&[0.0, 0.02]),
+            &[(-3.0, 3.0); 2],
+            8,
         );
+        for i in 0..2 {
+            assert!((found.above[i] - 0.5).abs() < 0.1, "{found:?}");
+            assert!((found.below[i] - 1.0).abs() < 0.1, "{found:?}");
+        }
     }
 
     #[test]
