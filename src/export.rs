@@ -211,6 +211,9 @@ pub struct FitReport {
     /// The effective GPS sigma (m), correlation time (s, `None`: independent fixes) and bias walk.
     pub gps_sigma_m: f64,
     pub gps_tau_s: Option<f64>,
+    /// The GPS heights' own correlation time (s; `None`: `gps_tau_s`).
+    #[serde(default)]
+    pub gps_tau_vertical_s: Option<f64>,
     /// The jitter on top of a correlated error (m; see `model::noise`).
     #[serde(default)]
     pub gps_white_m: f64,
@@ -271,6 +274,7 @@ impl FitReport {
             segment_preference: crate::optimisation::noise::segment_preference(model, fit.params()),
             gps_sigma_m: model.spec.sigma_horizontal_m,
             gps_tau_s: model.spec.gps_tau_s,
+            gps_tau_vertical_s: model.spec.gps_tau_vertical_s,
             gps_white_m: model.spec.gps_white_m,
             bias_walk: model.spec.bias_walk_dps_sqrt_s,
             parameters,

@@ -174,7 +174,7 @@ fn city_rides_fitted_with_gps_outliers_from_the_start_beat_the_fixes() {
 #[test]
 fn the_heights_noise_is_estimated_apart_from_the_horizontal() {
     // The simulator's heights wander at 2 times the horizontal (3 m against
-    // 1.5 m) and jitter at 3 times (1.5 m against 0.5 m).
+    // 1.5 m) over the same 60 s, and jitter at 3 times (1.5 m against 0.5 m).
     for seed in [21, 22] {
         let (_, sig) = ride(seed, 600.0, "open");
         let mut fit = Reconstruction::new(sig, FitSettings::default()).expect("fit");
@@ -187,6 +187,19 @@ fn the_heights_noise_is_estimated_apart_from_the_horizontal() {
         assert!((r.value / 2.0).ln().abs() <= 2.0 * sd, "ratio {r:?} vs 2");
         let j = n.gps_white_vertical_m.expect("heights' own jitter");
         assert!((j / 1.5 - 1.0).abs() < 0.2, "vertical jitter {j} vs 1.5 m");
+        // Their own correlation time (the simulator's is the horizontal's,
+        // 60 s), with a range that holds it.
+        let t = n.gps_tau_vertical_s;
+        let sd = if t.value < 60.0 {
+            (t.high / t.value).ln()
+        } else {
+            (t.value / t.low).ln()
+        };
+        assert!(t.estimated && sd > 0.0 && sd < 1.0, "{t:?}");
+        assert!(
+            (t.value / 60.0).ln().abs() <= 2.0 * sd,
+            "heights' tau {t:?} vs 60 s"
+        );
     }
 }
 

@@ -361,7 +361,7 @@ impl Model {
             lag,
             lag_moves,
             robust: self.robust_scale(),
-            links: noise::links(obs, self.spec.gps_tau_s),
+            links: noise::links(obs, self.spec.gps_taus()),
         }
     }
 }

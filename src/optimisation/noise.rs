@@ -27,13 +27,17 @@
 //! real errors reads as fast wander, and the likelihood trades the correlation
 //! time away (on simulated rides with a 60 s wander plus 0.5 m of jitter it
 //! chose 3 s), which left the path's sigma a third of its error (32.6 % of the
-//! truth inside the 95 % ellipse). The GPS heights' wander and jitter are
-//! the horizontal ones times a ratio that is searched with the rest: a
+//! truth inside the 95 % ellipse). The GPS heights have a wander of their
+//! own (the horizontal sigma times a searched ratio, and a searched
+//! correlation time) and a jitter of their own (from their misfits): a
 //! receiver's heights are typically 1.5-3 times worse than its horizontal
 //! fixes, and a ratio held at the default 8/3 where the heights are 2 times
 //! worse pulled the shared sigma down (the heights, wrongly weighted, read
 //! as a smaller wander) and the path's ellipses held the truth at 83 % of the
-//! rows instead of 89 % with the ratio right. The
+//! rows instead of 89 % with the ratio right; one correlation time for both
+//! let a 3D path's slow height misfit pose as a slow horizontal wander (see
+//! `estimate`). The horizontal settings and the heights' are searched in
+//! turn. The
 //! uncertainty of each setting is the curvature of `-2 ln L` in its
 //! logarithm (`sd(ln phi) = sqrt(2 / f'')`, the inverse of the Hessian),
 //! and along a direction it hardly curves (a ridge) how far `-2 ln L` lets
@@ -146,7 +150,7 @@ pub struct NoiseEstimate {
     /// Correlation time of the GPS error (s).
     pub gps_tau_s: Estimated,
     /// The jitter of each fix on top of the wander (m per axis, horizontal).
-    #[serde(default = "no_jitter")]
+    #[serde(default = "not_estimated")]
     pub gps_white_m: Estimated,
     /// Bias-walk density (deg/s/sqrt(s)).
     pub bias_walk: Estimated,
@@ -157,6 +161,9 @@ pub struct NoiseEstimate {
     /// differences; `None`: the horizontal jitter times the ratio.
     #[serde(default)]
     pub gps_white_vertical_m: Option<f64>,
+    /// The GPS heights' own correlation time (s).
+    #[serde(default = "not_estimated")]
+    pub gps_tau_vertical_s: Estimated,
     /// `-2 ln L` at the choice.
     pub neg2_log_likelihood: f64,
     /// Likelihood evaluations (chain solves) the search took.
@@ -172,6 +179,11 @@ impl NoiseEstimate {
             self.bias_walk.value,
             self.gps_white_m.value.max(BOUNDS[3].0),
             self.gps_vertical_ratio.value,
+            if self.gps_tau_vertical_s.value > 0.0 {
+                self.gps_tau_vertical_s.value
+            } else {
+                self.gps_tau_s.value
+            },
         ];
         let mut spec = spec_at(spec, x.map(f64::ln), which);
         if which.gps && self.gps_white_vertical_m.is_some() {
@@ -213,14 +225,26 @@ impl NoiseEstimate {
     }
 
     /// The GPS heights' noise in words, when it was estimated: "2.0 times
-    /// the horizontal wander (1.8-2.2), jitter 1.52 m".
+    /// the horizontal wander (1.8-2.2), correlated over 62 s (50-80),
+    /// jitter 1.52 m".
     pub fn heights_text(&self) -> Option<String> {
         self.gps_vertical_ratio.estimated.then(|| {
+            let tau = &self.gps_tau_vertical_s;
+            let tau = if !tau.estimated {
+                String::new()
+            } else if tau.limit == Limit::AtLeast {
+                format!(
+                    ", correlated over {} (more than the ride can tell)",
+                    tau.describe("s", 0)
+                )
+            } else {
+                format!(", correlated over {}", tau.describe("s", 0))
+            };
             let jitter = self
                 .gps_white_vertical_m
                 .map_or(String::new(), |j| format!(", jitter {j:.2} m"));
             format!(
-                "{} the horizontal wander{jitter}",
+                "{} the horizontal wander{tau}{jitter}",
                 self.gps_vertical_ratio.describe("times", 2)
             )
         })
@@ -247,24 +271,28 @@ fn default_vertical_ratio() -> Estimated {
     Estimated::held(spec.sigma_vertical_m / spec.sigma_horizontal_m)
 }
 
-/// Reports written before the jitter was modelled had none.
-fn no_jitter() -> Estimated {
+/// A setting reports written before it was modelled do not have (the
+/// jitter, the heights' own correlation time): none, not estimated.
+fn not_estimated() -> Estimated {
     Estimated::held(0.0)
 }
 
 /// The settings searched: GPS sigma, correlation time, bias walk, jitter,
-/// and the heights' ratio to the horizontal.
-const SETTINGS: usize = 5;
+/// the heights' ratio to the horizontal and their own correlation time.
+const SETTINGS: usize = 6;
 
 /// Bounds of the search (natural units): sigma (m), tau (s), walk
 /// (deg/s/sqrt(s)), jitter (m; at the floor the fixes have none to speak
-/// of), heights' ratio.
+/// of), heights' ratio (wide: while the horizontal settings are searched
+/// the heights' wander is held in metres, so the ratio moves against the
+/// horizontal sigma), heights' correlation time (s).
 const BOUNDS: [(f64, f64); SETTINGS] = [
     (0.05, 100.0),
     (0.3, 1800.0),
     (1e-5, 0.5),
     (0.01, 100.0),
-    (0.5, 10.0),
+    (0.05, 100.0),
+    (0.3, 1800.0),
 ];
 
 /// Newton iterations at most (a start from the misfits' moments typically
@@ -292,6 +320,11 @@ fn point(spec: &ModelSpec) -> [f64; SETTINGS] {
             .ln(),
         spec.gps_white_m.max(BOUNDS[3].0).ln(),
         (spec.sigma_vertical_m / spec.sigma_horizontal_m).ln(),
+        spec.gps_tau_vertical_s
+            .or(spec.gps_tau_s)
+            .filter(|t| *t > 0.0)
+            .unwrap_or(START_TAU_S)
+            .ln(),
     ]
 }
 
@@ -303,6 +336,7 @@ fn point(spec: &ModelSpec) -> [f64; SETTINGS] {
 fn bounds_for(span: f64) -> [(f64, f64); SETTINGS] {
     let mut b = BOUNDS;
     b[1].1 = span.clamp(10.0 * b[1].0, b[1].1);
+    b[5].1 = b[1].1;
     b
 }
 
@@ -315,8 +349,9 @@ fn clamp(x: [f64; SETTINGS], bounds: &[(f64, f64); SETTINGS]) -> [f64; SETTINGS]
 }
 
 /// `spec` with the settings `which` covers taken from the log-space point
-/// `x` (sigma, tau, walk, jitter, the heights' ratio); the others stay as set (independent fixes, no
-/// prior), so the likelihood is that of the model the fit will run.
+/// `x` (sigma, tau, walk, jitter, the heights' ratio and correlation time);
+/// the others stay as set (independent fixes, no prior), so the likelihood
+/// is that of the model the fit will run.
 fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec {
     let mut out = spec.clone();
     if which.gps {
@@ -324,6 +359,7 @@ fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec 
         out.sigma_vertical_m = (x[0] + x[4]).exp();
         out.gps_tau_s = Some(x[1].exp());
         out.gps_white_m = x[3].exp();
+        out.gps_tau_vertical_s = Some(x[5].exp());
     }
     if which.walk {
         out.bias_walk_dps_sqrt_s = Some(x[2].exp());
@@ -364,17 +400,25 @@ pub fn estimate(
 ) -> Option<NoiseEstimate> {
     let mut spec = model.spec.clone();
     let heights = model.observes_gps_heights();
-    let dims: Vec<usize> = [
-        (0, which.gps),
-        (1, which.gps),
-        (3, which.gps),
-        (4, which.gps && heights),
-        (2, which.walk),
-    ]
-    .iter()
-    .filter(|(_, on)| *on)
-    .map(|(d, _)| *d)
-    .collect();
+    let on = |list: &[(usize, bool)]| -> Vec<usize> {
+        list.iter().filter(|(_, on)| *on).map(|(d, _)| *d).collect()
+    };
+    // Two searches in turn: the horizontal settings (and the walk) with the
+    // heights' held, then the heights' wander (its ratio and correlation
+    // time) with the rest held. They are nearly independent (only the path
+    // ties them), and apart each stencil is small: 9 + 5 likelihoods a
+    // round for 14 together, and 20 with the heights' correlation time in
+    // the same stencil (which on 30-minute rides took 100-146 likelihoods).
+    let blocks = [
+        on(&[
+            (0, which.gps),
+            (1, which.gps),
+            (3, which.gps),
+            (2, which.walk),
+        ]),
+        on(&[(4, which.gps && heights), (5, which.gps && heights)]),
+    ];
+    let dims: Vec<usize> = blocks.concat();
     // The path's derivatives do not depend on the noise: linearise once.
     let base = model.chain_system(theta, free)?;
     let fixes = &model.signals.fixes;
@@ -388,9 +432,8 @@ pub fn estimate(
     // settings as set (3 m and 20 s, typically tens of times off): a
     // shorter search.
     let guess = |vertical| model.gps_noise_guess(theta, &base.linearisation().x, vertical);
-    if which.gps
-        && let Some((sigma, tau, jitter)) = guess(false)
-    {
+    let horizontal = guess(false).filter(|_| which.gps);
+    if let Some((sigma, tau, jitter)) = horizontal {
         x0[0] = sigma.ln();
         x0[1] = tau.ln();
         x0[3] = jitter.max(BOUNDS[3].0).ln();
@@ -399,13 +442,21 @@ pub fn estimate(
     // held through the search: a receiver's heights need not jitter in the
     // ratio they wander (the simulator's wander at 2 and jitter at 3 times
     // the horizontal; one ratio for both settled near 2.7 and left the
-    // ellipses where they were), and a sixth searched setting would cost
-    // half the search again.
+    // ellipses where they were). Their wander and its correlation time are
+    // searched, starting from their misfits' moments: a 3D path's heights
+    // misfit over longer times than its horizontal fixes (the pitch follows
+    // only the heights), and one correlation time for both read that as a
+    // slow horizontal wander (seed 5 over 6 hours: 2.57 m over 187 s for a
+    // true 1.5 m over 60 s; 1.47 m over 58 s with the heights' own).
     if which.gps
         && heights
-        && let Some((_, _, jitter)) = guess(true)
+        && let Some((sigma, tau, jitter)) = guess(true)
     {
         spec.gps_white_vertical_m = Some(jitter.max(BOUNDS[3].0));
+        x0[5] = tau.ln();
+        if let Some((horizontal_sigma, _, _)) = horizontal {
+            x0[4] = (sigma / horizontal_sigma).ln();
+        }
     }
     let spec = &spec;
     let x0 = clamp(x0, &bounds);
@@ -427,34 +478,55 @@ pub fn estimate(
         )
     };
     let side_by_side = fixes.len() <= SIDE_BY_SIDE_FIXES;
-    let f = |y: &[f64]| at(with(x0, &dims, y));
-    let y0: Vec<f64> = dims.iter().map(|&d| x0[d]).collect();
-    let f0 = f(&y0);
-    if !f0.is_finite() {
+    let mut x = x0;
+    let mut value = at(x);
+    if !value.is_finite() {
         return None;
     }
-    let log_bounds: Vec<(f64, f64)> = dims
-        .iter()
-        .map(|&d| (bounds[d].0.ln(), bounds[d].1.ln()))
-        .collect();
-    let found = newton(
-        Objective {
-            f: &f,
-            side_by_side,
-        },
-        &y0,
-        f0,
-        &log_bounds,
-        MAX_NEWTON_ITERATIONS,
-    );
-    let x = with(x0, &dims, &found.x);
-    let value = found.value;
     let mut limit = [Limit::None; SETTINGS];
     let (mut below, mut above) = ([f64::INFINITY; SETTINGS], [f64::INFINITY; SETTINGS]);
-    for (i, &d) in dims.iter().enumerate() {
-        limit[d] = found.limit[i];
-        below[d] = found.below[i];
-        above[d] = found.above[i];
+    for block in blocks.iter().filter(|b| !b.is_empty()) {
+        let start = x;
+        // The heights' wander in metres (sigma times the ratio) stays as it
+        // was while the horizontal sigma moves without the ratio.
+        let place = |y: &[f64]| {
+            let mut x = with(start, block, y);
+            if block.contains(&0) && !block.contains(&4) {
+                x[4] = start[0] + start[4] - x[0];
+            }
+            x
+        };
+        let f = |y: &[f64]| at(place(y));
+        let y0: Vec<f64> = block.iter().map(|&d| x[d]).collect();
+        let log_bounds: Vec<(f64, f64)> = block
+            .iter()
+            .map(|&d| (bounds[d].0.ln(), bounds[d].1.ln()))
+            .collect();
+        let found = newton(
+            Objective {
+                f: &f,
+                side_by_side,
+            },
+            &y0,
+            value,
+            &log_bounds,
+            MAX_NEWTON_ITERATIONS,
+        );
+        x = place(&found.x);
+        value = found.value;
+        for (i, &d) in block.iter().enumerate() {
+            limit[d] = found.limit[i];
+            below[d] = found.below[i];
+            above[d] = found.above[i];
+        }
+    }
+    // The heights' block measured the ratio with the horizontal sigma held,
+    // i.e. the heights' own wander in metres; the ratio is that over the
+    // horizontal sigma, so its range takes the sigma's too (the blocks are
+    // nearly independent: their shares add in quadrature).
+    if blocks[1].contains(&4) && limit[0] == Limit::None {
+        below[4] = below[4].hypot(above[0]);
+        above[4] = above[4].hypot(below[0]);
     }
     let inner: Vec<usize> = dims
         .iter()
@@ -474,6 +546,11 @@ pub fn estimate(
         dir[d] = inward;
         if d == 1 && inner.contains(&0) {
             dir[0] = 0.5 * inward;
+        }
+        // The heights' along their own ridge: their sigma is the
+        // horizontal's times the ratio.
+        if d == 5 && inner.contains(&4) {
+            dir[4] = 0.5 * inward;
         }
         let along = |t: &[f64]| at(std::array::from_fn(|k| x[k] + t[0] * dir[k]));
         reach[d] = one_sided(
@@ -495,6 +572,7 @@ pub fn estimate(
                     spec.bias_walk_dps_sqrt_s.unwrap_or(0.0),
                     spec.gps_white_m,
                     spec.sigma_vertical_m / spec.sigma_horizontal_m,
+                    spec.gps_tau_vertical_s.or(spec.gps_tau_s).unwrap_or(0.0),
                 ][d],
             );
         }
@@ -519,6 +597,7 @@ pub fn estimate(
         bias_walk: est(2),
         gps_vertical_ratio: est(4),
         gps_white_vertical_m: spec.gps_white_vertical_m.filter(|_| which.gps && heights),
+        gps_tau_vertical_s: est(5),
         neg2_log_likelihood: value,
         evaluations,
     })
@@ -1006,7 +1085,9 @@ mod tests {
         // With x1 held, x0's curvature alone: H_00 = 4, sd sqrt(2 / 4).
         assert!(
             (found.below[0] - 0.5f64.sqrt()).abs() < 1e-6 && found.below[0] == found.above[0],
-            "{found:?}"
+            "{:?} {:?}",
+            found.below,
+            found.above
         );
     }
 
@@ -1074,9 +1155,9 @@ mod tests {
 
     #[test]
     fn a_flat_ridge_reaches_as_far_as_the_likelihood_allows() {
-        // Narrow across y0 = y1, flat along it between walls at 0.5 and -1
-        // (a ridge that runs to a bound): a quadratic reading has no
-        // curvature along it; the scan finds the walls.
+        // Narrow across y0 = y1, flat along it between walls at y0 = 0.5 and
+        // y0 = -1 (a ridge that runs to a bound): a quadratic reading has no
+        // curvature along it; the scan finds the walls (to within its steps).
         let wall = |y: f64| 1e3 * ((y - 0.5).max(0.0) + (-1.0 - y).max(0.0));
         let f = |y: &[f64]| ((y[0] - y[1]) / 0.05).powi(2) + wall(y[0]) + wall(y[1]);
         let objective = Objective {
