@@ -35,7 +35,7 @@ fn truth_error(sim: &SimulatedRide, sig: &Signals, settings: FitSettings) -> f64
 }
 
 #[test]
-fn default_settings_are_within_5_percent_of_the_best_swept_or_as_good_as_the_true_noise() {
+fn default_settings_are_within_5_percent_of_the_best_swept() {
     for seed in [1, 2] {
         let (sim, sig) = ride(seed, 900.0, "open");
         let mut best = (f64::INFINITY, 0.0, 0.0);
@@ -66,10 +66,10 @@ fn default_settings_are_within_5_percent_of_the_best_swept_or_as_good_as_the_tru
             best.2,
             errors.fixes_m
         );
-        // The noise the simulator used, set by hand: what a perfect estimate
-        // could do. On seed 1 the best swept setting is a bias walk four
-        // times stiffer than the truth, and the true noise itself ends 6.1 %
-        // behind it; an estimate as good as the truth passes too.
+        // The noise the simulator used, set by hand, for comparison: on
+        // seed 1 the best swept setting is a bias walk four times stiffer
+        // than the truth, and the true noise itself ends 6.1 % behind it
+        // (the default, with the heights' own correlation time, 4.6 %).
         let mut truth = FitSettings {
             auto_noise: AutoNoise::OFF,
             ..FitSettings::default()
@@ -82,7 +82,7 @@ fn default_settings_are_within_5_percent_of_the_best_swept_or_as_good_as_the_tru
         let true_noise = truth_error(&sim, &sig, truth);
         eprintln!("seed {seed}: under the true noise {true_noise:.3} m");
         assert!(
-            auto <= 1.05 * best.0 || auto <= true_noise,
+            auto <= 1.05 * best.0,
             "seed {seed}: {auto} m vs {} m (true noise {true_noise} m)",
             best.0
         );
