@@ -139,7 +139,11 @@ impl GyropathApp {
                     ui.end_row();
                     if let Some(heights) = n.heights_text() {
                         ui.label("GPS heights");
-                        ui.label(heights);
+                        // Wrapped: on one line it widened the whole panel.
+                        ui.vertical(|ui| {
+                            ui.set_max_width(280.0);
+                            ui.add(egui::Label::new(heights).wrap());
+                        });
                         ui.end_row();
                     }
                     ui.label("bias walk");
