@@ -56,7 +56,7 @@ fn main() -> anyhow::Result<()> {
             vec![51, 53, 54, 55, 56, 57],
             "open",
         ),
-        ("gps_outliers", vec![7, 8, 9], "urban"),
+        ("gps_outliers", vec![7, 8, 9, 10, 11, 12, 13, 14], "urban"),
         (
             "",
             vec![48, 49, 60, 61, 62, 63, 64, 65, 66, 67, 68, 69],

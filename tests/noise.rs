@@ -121,27 +121,35 @@ fn the_bias_walk_estimate_brackets_the_true_walk() {
 }
 
 #[test]
-fn a_city_ride_points_at_gps_outliers_and_the_fit_with_them_beats_the_fixes() {
-    let (sim, sig) = ride(7, 1200.0, "urban");
-    let d = diagnose(
-        sig.clone(),
-        &FitSettings::default(),
-        &Folds::default(),
-        &|_| {},
-    )
-    .expect("diagnose");
-    let first = &d.ranking[0];
-    eprintln!(
-        "urban: {} first ({:+.1} %, t {:.1}, significant {})",
-        first.effect,
-        100.0 * first.drop,
-        first.t_statistic,
-        first.significant
-    );
-    assert_eq!(first.effect, "gps_outliers");
-    assert!(first.significant);
-    let e = fit_with_outliers(7, &sim, &sig);
-    assert!(e.path_at_fixes_m <= 0.4 * e.fixes_m, "{e:?}");
+fn city_rides_point_at_gps_outliers_and_the_fit_with_them_beats_the_fixes() {
+    // Seeds 9 and 10 were missed while the ranking judged `gps_outliers` by
+    // the base model's robust score alone (t 1.8 and 0.7): the fixes' own
+    // error, 15-25 m, drowns the path's gain of 2 m. Scored as a noise
+    // distribution against the base's Gaussian, every block sees it.
+    for seed in [7, 9, 10] {
+        let (sim, sig) = ride(seed, 1200.0, "urban");
+        let d = diagnose(
+            sig.clone(),
+            &FitSettings::default(),
+            &Folds::default(),
+            &|_| {},
+        )
+        .expect("diagnose");
+        let first = &d.ranking[0];
+        eprintln!(
+            "urban seed {seed}: {} first ({:+.1} %, t {:.1}, significant {})",
+            first.effect,
+            100.0 * first.drop,
+            first.t_statistic,
+            first.significant
+        );
+        assert_eq!(first.effect, "gps_outliers", "seed {seed}");
+        assert!(first.significant, "seed {seed}");
+        if seed == 7 {
+            let e = fit_with_outliers(7, &sim, &sig);
+            assert!(e.path_at_fixes_m <= 0.4 * e.fixes_m, "{e:?}");
+        }
+    }
 }
 
 /// A fit of a city ride with `gps_outliers` from the start, against the truth (printed).

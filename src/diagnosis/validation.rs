@@ -130,6 +130,30 @@ impl HeldOut {
         }
     }
 
+    /// Predictive log-likelihood per block: `sum ln p(e_k)` over the block's
+    /// withheld fixes under `law` at the scale that fits all of them best
+    /// (one parameter, as a noise model's sigma is fitted); `None` for blocks
+    /// without a withheld fix, and for every block when no scale fits.
+    pub fn block_log_likelihood(&self, law: ErrorLaw) -> Vec<Option<f64>> {
+        let nb = self.blocks.iter().max().map_or(0, |b| b + 1);
+        let mut ll = vec![None; nb];
+        let finite: Vec<f64> = self
+            .errors
+            .iter()
+            .copied()
+            .filter(|e| e.is_finite())
+            .collect();
+        let Some(scale) = law.fitted_scale(&finite) else {
+            return ll;
+        };
+        for (e, &b) in self.errors.iter().zip(&self.blocks) {
+            if e.is_finite() {
+                *ll[b].get_or_insert(0.0) += law.ln_density(*e, scale);
+            }
+        }
+        ll
+    }
+
     /// Robust score per block: `L_b = sum ln(1 + (e_k / s)^2)` over the
     /// block's withheld fixes, the Cauchy negative log-likelihood of their
     /// errors at scale `s` less its constant (0 for the end blocks, never
@@ -144,6 +168,84 @@ impl HeldOut {
             }
         }
         loss
+    }
+}
+
+/// The distribution a model's noise model gives a withheld fix's error, as
+/// a density over the horizontal plane of the error's length `e` at scale `s`:
+///
+/// ```text
+/// Gaussian:  p(e) = exp(-e^2 / (2 s^2)) / (2 pi s^2)
+/// Cauchy:    p(e) = (1 + e^2 / s^2)^(-3/2) / (2 pi s^2)   (bivariate Student t, 1 dof)
+/// ```
+///
+/// Both integrate to one over the plane, so the log-likelihoods of the same
+/// fixes under the two can be compared: that is how a candidate that changes
+/// the noise distribution itself (`gps_outliers`) is judged against a model
+/// that keeps it Gaussian.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ErrorLaw {
+    Gaussian,
+    Cauchy,
+}
+
+impl ErrorLaw {
+    /// The law of a model's GPS errors: Cauchy when an effect gives the GPS
+    /// rows a robust loss, else Gaussian.
+    pub fn of(model: &Model) -> Self {
+        if model.effects().iter().any(|e| e.robust_scale().is_some()) {
+            ErrorLaw::Cauchy
+        } else {
+            ErrorLaw::Gaussian
+        }
+    }
+
+    /// `ln p(e)` at scale `s` (see the type's documentation).
+    pub fn ln_density(self, e: f64, s: f64) -> f64 {
+        let r2 = (e / s).powi(2);
+        let norm = -(2.0 * std::f64::consts::PI * s * s).ln();
+        match self {
+            ErrorLaw::Gaussian => norm - 0.5 * r2,
+            ErrorLaw::Cauchy => norm - 1.5 * r2.ln_1p(),
+        }
+    }
+
+    /// The maximum-likelihood scale of `errors` (finite lengths), `None`
+    /// without one that is positive.
+    ///
+    /// Gaussian: `s^2 = sum e^2 / 2n`. Cauchy: `d ln L / ds = 0` gives
+    /// `sum e^2 / (s^2 + e^2) = 2n / 3`, whose left side falls from the count
+    /// of non-zero errors to 0 as `s` grows: one root, found by bisection in
+    /// `ln s` (none when a third or more of the errors are exactly zero).
+    pub fn fitted_scale(self, errors: &[f64]) -> Option<f64> {
+        let n = errors.len() as f64;
+        let max = errors.iter().fold(0.0f64, |m, e| m.max(e.abs()));
+        if errors.is_empty() || max <= 0.0 || !max.is_finite() {
+            return None;
+        }
+        match self {
+            ErrorLaw::Gaussian => {
+                Some((errors.iter().map(|e| e * e).sum::<f64>() / (2.0 * n)).sqrt())
+            }
+            ErrorLaw::Cauchy => {
+                let excess = |s: f64| {
+                    errors.iter().map(|e| e * e / (s * s + e * e)).sum::<f64>() - 2.0 * n / 3.0
+                };
+                let (mut lo, mut hi) = ((max * 1e-9).ln(), (max * 1e3).ln());
+                if excess(lo.exp()) <= 0.0 {
+                    return None;
+                }
+                for _ in 0..100 {
+                    let mid = 0.5 * (lo + hi);
+                    if excess(mid.exp()) > 0.0 {
+                        lo = mid;
+                    } else {
+                        hi = mid;
+                    }
+                }
+                Some((0.5 * (lo + hi)).exp())
+            }
+        }
     }
 }
 
@@ -296,6 +398,72 @@ mod tests {
             loss[1..11].iter().filter(|&&s| s > 0.0).count() >= 8,
             "{loss:?}"
         );
+    }
+
+    /// `n` standard normal draws (Box-Muller over a fixed LCG, so the test cannot flake).
+    fn normals(n: usize) -> Vec<f64> {
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (0..n)
+            .map(|_| (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos())
+            .collect()
+    }
+
+    #[test]
+    fn both_error_laws_are_densities_over_the_plane() {
+        for law in [ErrorLaw::Gaussian, ErrorLaw::Cauchy] {
+            // integral of 2 pi e p(e) de over e = s tan(u) (Cauchy's tail is
+            // e^-2: a finite upper limit would miss 1 / sqrt(1 + (E/s)^2)).
+            let s = 2.5;
+            let n = 200_000;
+            let h = std::f64::consts::FRAC_PI_2 / n as f64;
+            let total: f64 = (0..n)
+                .map(|i| {
+                    let u = (i as f64 + 0.5) * h;
+                    let e = s * u.tan();
+                    let de = s / u.cos().powi(2);
+                    std::f64::consts::TAU * e * law.ln_density(e, s).exp() * de * h
+                })
+                .sum();
+            assert!((total - 1.0).abs() < 1e-4, "{law:?}: {total}");
+        }
+    }
+
+    #[test]
+    fn fitted_scales_maximise_the_likelihood_and_recover_the_true_one() {
+        let z = normals(12_000);
+        let normal: Vec<f64> = z[..8000].chunks(2).map(|p| p[0].hypot(p[1])).collect();
+        let g = ErrorLaw::Gaussian.fitted_scale(&normal).expect("scale");
+        assert!((g - 1.0).abs() < 0.03, "gaussian sigma {g}");
+        // A bivariate Cauchy of scale 2: a 2D normal over |N(0, 1)|.
+        let heavy: Vec<f64> = z[8000..]
+            .chunks_exact(3)
+            .map(|p| 2.0 * p[0].hypot(p[1]) / p[2].abs())
+            .collect();
+        for (law, errors) in [(ErrorLaw::Gaussian, &normal), (ErrorLaw::Cauchy, &heavy)] {
+            let s = law.fitted_scale(errors).expect("scale");
+            let ll = |s: f64| errors.iter().map(|&e| law.ln_density(e, s)).sum::<f64>();
+            assert!(
+                ll(s) > ll(s * 1.01) && ll(s) > ll(s / 1.01),
+                "{law:?} at {s}"
+            );
+        }
+        let c = ErrorLaw::Cauchy.fitted_scale(&heavy).expect("scale");
+        assert!((c / 2.0 - 1.0).abs() < 0.1, "cauchy scale {c}");
+        // Each law wins on its own errors.
+        let total = |law: ErrorLaw, e: &[f64]| {
+            let s = law.fitted_scale(e).expect("scale");
+            e.iter().map(|&x| law.ln_density(x, s)).sum::<f64>()
+        };
+        assert!(total(ErrorLaw::Gaussian, &normal) > total(ErrorLaw::Cauchy, &normal) + 50.0);
+        assert!(total(ErrorLaw::Cauchy, &heavy) > total(ErrorLaw::Gaussian, &heavy) + 50.0);
+        assert_eq!(ErrorLaw::Cauchy.fitted_scale(&[0.0, 0.0, 1.0]), None);
+        assert_eq!(ErrorLaw::Gaussian.fitted_scale(&[]), None);
     }
 
     #[test]

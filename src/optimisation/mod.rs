@@ -333,11 +333,19 @@ impl Reconstruction {
         Ok(self)
     }
 
+    /// The window after the current one, `length` long. Under a robust loss
+    /// the whole ride is a last window too, so that it is also reached by
+    /// least squares first (see `Model::least_squares`).
     fn next_window(&self, length: f64) -> Result<Option<Window>, FitError> {
         let sig = &self.model.signals;
-        if length >= sig.duration() {
+        let whole_done = self
+            .window
+            .as_ref()
+            .is_some_and(|w| w.length >= sig.duration());
+        if length >= sig.duration() && (self.model.robust_scale().is_none() || whole_done) {
             return Ok(None);
         }
+        let length = length.min(sig.duration());
         let t_end = sig.t[0] + length;
         if let Some(prev) = &self.window
             && prev.length >= ANCHOR_AFTER_S
@@ -347,13 +355,15 @@ impl Reconstruction {
             if let Some((row, start)) = self.first_segment_from(from) {
                 return Ok(Some(Window {
                     length,
-                    model: prev.model.window(&self.theta, row - 1, t_end)?,
+                    model: prev
+                        .model
+                        .window(&self.theta, row - 1, t_end)?
+                        .least_squares(true),
                     from: Some(start),
                 }));
             }
         }
-        // The first window by least squares (see `Model::least_squares`).
-        self.cut_window(length, self.window.is_none()).map(Some)
+        self.cut_window(length, true).map(Some)
     }
 
     /// Step 1's window over the ride's first `length` seconds, from row 0.
@@ -361,11 +371,7 @@ impl Reconstruction {
         let model = self.model.restricted(self.model.signals.t[0] + length)?;
         Ok(Window {
             length,
-            model: if least_squares {
-                model.least_squares()
-            } else {
-                model
-            },
+            model: model.least_squares(least_squares),
             from: None,
         })
     }
@@ -584,6 +590,22 @@ impl Reconstruction {
         self.phase_iterations[slot] += 1;
         self.stage_iterations += 1;
         let stage_done = outcome.converged || self.stage_iterations >= self.settings.max_iter;
+        if phase == Phase::Step1
+            && stage_done
+            && let Some(window) = self
+                .window
+                .take_if(|w| w.model.is_least_squares() && self.model.robust_scale().is_some())
+        {
+            // The window's least-squares optimum reached: the same window
+            // again under the robust loss (see `Model::least_squares`).
+            self.window = Some(Window {
+                model: window.model.least_squares(false),
+                ..window
+            });
+            self.stage_iterations = 0;
+            self.lm = LmState::new(self.settings.damping);
+            return Some(self.report(phase, outcome, false));
+        }
         if phase == Phase::Step1
             && let Some(window) = &self.window
             && stage_done
