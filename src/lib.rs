@@ -14,6 +14,7 @@
 //! - [`export`]: reconstructed path CSV and JSON report.
 //! - `app` (feature `app`, on by default): the eframe desktop app; draws what the core computes.
 //! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
+//! - [`statistics`]: order statistics (the median) that the modules above share.
 
 // Index loops over rows and axes read like the equations they implement.
 #![allow(clippy::needless_range_loop)]
@@ -29,6 +30,7 @@ pub mod model;
 pub mod optimisation;
 pub mod signals;
 pub mod simulation;
+pub mod statistics;
 
 #[cfg(test)]
 pub(crate) mod testing;

@@ -343,10 +343,13 @@ fn candidate(
     }
 }
 
+/// The median of the finite values, 0 for none.
 fn median(v: &[f64]) -> f64 {
-    let mut s: Vec<f64> = v.iter().copied().filter(|e| e.is_finite()).collect();
-    s.sort_by(f64::total_cmp);
-    s.get(s.len() / 2).copied().unwrap_or(0.0)
+    let mut finite: Vec<f64> = v.iter().copied().filter(|e| e.is_finite()).collect();
+    match crate::statistics::median(&mut finite) {
+        m if m.is_nan() => 0.0,
+        m => m,
+    }
 }
 
 /// Per-block gains `ln(L_base / L_candidate)` of the robust loss, over blocks that hold fixes.

@@ -50,8 +50,7 @@ pub fn whiteness(residuals: &[FixResidual]) -> Option<Vec<Whiteness>> {
         return None;
     }
     let mut dts: Vec<f64> = residuals.windows(2).map(|w| w[1].t - w[0].t).collect();
-    dts.sort_by(f64::total_cmp);
-    let interval = dts[dts.len() / 2];
+    let interval = crate::statistics::median(&mut dts);
     if interval <= 0.0 {
         return None;
     }

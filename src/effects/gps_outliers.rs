@@ -41,8 +41,7 @@ impl GpsOutliers {
         let sigma_m = if second.is_empty() {
             sigma_horizontal_m
         } else {
-            second.sort_by(f64::total_cmp);
-            1.4826 * second[second.len() / 2] / 6f64.sqrt()
+            1.4826 * crate::statistics::median(&mut second) / 6f64.sqrt()
         };
         let scale = 2.385 * sigma_m.max(sigma_horizontal_m) / sigma_horizontal_m;
         Self { scale, sigma_m }

@@ -284,17 +284,9 @@ fn unit_factor(beta: f64) -> Option<f64> {
     }
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn sample_rate(log: &RideLog, report: &mut CheckReport) {
-    let dt: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    let rate = 1.0 / median(dt);
+    let mut dt: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let rate = 1.0 / crate::statistics::median(&mut dt);
     let (level, note) = if rate < 20.0 {
         (
             Level::Info,

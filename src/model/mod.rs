@@ -143,11 +143,7 @@ fn accuracy_scale(acc: impl Iterator<Item = Option<f64>>) -> Option<f64> {
         .flatten()
         .filter(|a| a.is_finite() && *a > 0.0)
         .collect();
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    Some(v[v.len() / 2])
+    (!v.is_empty()).then(|| crate::statistics::median(&mut v))
 }
 
 /// The noise of one fix: `sigma_k = sigma * acc_k / median(acc)`.

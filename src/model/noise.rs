@@ -56,6 +56,7 @@
 //! coefficients from [`Link`].
 
 use super::{Model, Observation};
+use crate::statistics::median;
 
 /// Consecutive fixes further apart than this (s) are not a pair in the
 /// moments of [`gps_noise_guess`] (its lag-one covariance assumes the
@@ -313,8 +314,7 @@ pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64
             wander = 2.0 * c1 * c1 / denominator;
         }
         if !(wander > 0.01 * var && wander < var && c1 < wander) {
-            second.sort_by(f64::total_cmp);
-            let r = 1.4826 * second[second.len() / 2] / 6f64.sqrt();
+            let r = 1.4826 * median(&mut second) / 6f64.sqrt();
             wander = var - r.min(0.9 * var.sqrt()).powi(2);
         }
     } else {
@@ -322,8 +322,7 @@ pub(crate) fn gps_noise_guess(misfits: &[(f64, usize, f64)]) -> Option<(f64, f64
     }
     let jitter = (var - wander).max(0.0).sqrt();
     let rho = c1 / wander;
-    spacing.sort_by(f64::total_cmp);
-    let dt = spacing[spacing.len() / 2];
+    let dt = median(&mut spacing);
     (rho > 0.0).then(|| (wander.sqrt(), -dt / rho.min(0.999).ln(), jitter))
 }
 
@@ -337,14 +336,12 @@ fn winsorised(mut misfits: Vec<(f64, usize, f64)>) -> Vec<(f64, usize, f64)> {
     if v.is_empty() {
         return misfits;
     }
-    v.sort_by(f64::total_cmp);
-    let median = v[v.len() / 2];
-    let mut dev: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
-    dev.sort_by(f64::total_cmp);
-    let c = 3.0 * 1.4826 * dev[dev.len() / 2];
+    let centre = median(&mut v);
+    let mut dev: Vec<f64> = v.iter().map(|x| (x - centre).abs()).collect();
+    let c = 3.0 * 1.4826 * median(&mut dev);
     if c > 0.0 {
         for m in &mut misfits {
-            m.2 = m.2.clamp(median - c, median + c);
+            m.2 = m.2.clamp(centre - c, centre + c);
         }
     }
     misfits

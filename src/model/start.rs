@@ -60,16 +60,6 @@ fn wrap(a: f64) -> f64 {
     a - two_pi * ((a + std::f64::consts::PI) / two_pi).floor()
 }
 
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
-}
-
 impl StartGuess {
     pub fn from_signals(sig: &Signals) -> Result<Self, StartError> {
         let n = sig.len();
@@ -203,7 +193,7 @@ impl StartGuess {
             .map(|&(t, d, _)| wrap(d - offset0 - slope0 * t))
             .collect();
         let mut abs: Vec<f64> = resid.iter().map(|r| r.abs()).collect();
-        let mad = median(&mut abs).max(0.01);
+        let mad = crate::statistics::median(&mut abs).max(0.01);
         let (mut sw, mut st, mut sr, mut stt, mut str_) = (0.0, 0.0, 0.0, 0.0, 0.0);
         for (&(t, _, w), &r) in samples.iter().zip(&resid) {
             if r.abs() <= 3.0 * mad / 0.6745 {
@@ -307,7 +297,7 @@ fn level_bias(sig: &Signals) -> Vector3<f64> {
         return still / still_t;
     }
     let mut gz: Vec<f64> = sig.gyro.iter().map(|g| g.z).collect();
-    let centre = median(&mut gz);
+    let centre = crate::statistics::median(&mut gz);
     let turn_limit = 3f64.to_radians();
     let (mut sum, mut time) = (Vector3::zeros(), 0.0);
     for j in 1..n {
