@@ -152,6 +152,18 @@ fn city_rides_point_at_gps_outliers_and_the_fit_with_them_beats_the_fixes() {
     }
 }
 
+#[test]
+fn the_bundled_city_example_points_at_gps_outliers() {
+    // What File > Examples says of it.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/city-gps.csv");
+    let log = gyropath::import::load_file(&path).expect("city example");
+    let sig = Arc::new(Signals::from_owned_log(log).expect("signals"));
+    let d = diagnose(sig, &FitSettings::default(), &Folds::default(), &|_| {}).expect("diagnose");
+    let first = &d.ranking[0];
+    assert_eq!(first.effect, "gps_outliers", "{:?}", d.ranking);
+    assert!(first.significant, "{first:?}");
+}
+
 /// A fit of a city ride with `gps_outliers` from the start, against the truth (printed).
 fn fit_with_outliers(seed: u64, sim: &SimulatedRide, sig: &Arc<Signals>) -> TruthErrors {
     let mut settings = FitSettings::default();

@@ -14,7 +14,7 @@ pub struct Example {
     pub shows: &'static str,
 }
 
-pub const EXAMPLES: [Example; 4] = [
+pub const EXAMPLES: [Example; 5] = [
     Example {
         label: "GPS lag (simulated bicycle)",
         path: "data/hidden-gps-lag.csv",
@@ -24,6 +24,11 @@ pub const EXAMPLES: [Example; 4] = [
         label: "Gyro scale errors (simulated bicycle)",
         path: "data/hidden-gyro-scale.csv",
         shows: "The gyro reads 3-4 % off on each axis: Diagnose finds gyro_scale.",
+    },
+    Example {
+        label: "City GPS (simulated bicycle)",
+        path: "data/city-gps.csv",
+        shows: "Street canyons: fixes pulled aside and a 70 m jump for 25 s. Diagnose ranks gps_outliers first; add it and the path stops bending towards the jumps.",
     },
     Example {
         label: "A real car minute (comma2k19)",
