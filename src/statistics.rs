@@ -19,6 +19,12 @@ pub fn median(values: &mut [f64]) -> f64 {
     }
 }
 
+/// The median of the finite values of `values` (NaN for none).
+pub fn median_of_finite(values: &[f64]) -> f64 {
+    let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    median(&mut finite)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -36,5 +42,7 @@ mod tests {
         let mut sorted = v.clone();
         sorted.sort_by(f64::total_cmp);
         assert_eq!(median(&mut v), 0.5 * (sorted[49] + sorted[50]));
+        assert_eq!(median_of_finite(&[f64::NAN, 1.0, f64::INFINITY, 3.0]), 2.0);
+        assert!(median_of_finite(&[f64::NAN]).is_nan());
     }
 }

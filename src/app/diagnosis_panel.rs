@@ -36,12 +36,19 @@ impl GyropathApp {
             }
             return;
         };
+        let jumps = match d.excluded_fixes {
+            0 => String::new(),
+            n => format!(" ({n} jumps out)"),
+        };
         ui.label(format!(
-            "{}: fit {:.3} m, held-out {:.3} m",
+            "{} refitted with the GPS noise as set: fit {:.3} m, held-out {:.3} m{jumps}",
             short_model(&d.model.join(", ")),
             d.fit_rms_m,
             d.heldout_rms_m
-        ));
+        ))
+        .on_hover_text(
+            "The ranking compares candidates under the GPS noise as set in Settings (not the noise estimated from the ride), as its significance rule was calibrated; so these errors can differ from the model history's, which are of the fit as it runs.",
+        );
         let current = self.snapshot.as_ref().map(|s| s.effects.clone());
         let stale = current.as_ref().is_some_and(|c| *c != d.model);
         if stale {

@@ -39,9 +39,14 @@ impl GyropathApp {
                             ui.label(format!("{}", row.params));
                             ui.label(format!("{}", row.iterations));
                             ui.label(format!("{:.3} m", row.fit_rms_m));
-                            match row.heldout_rms_m {
-                                Some(h) => ui.label(format!("{h:.3} m")),
-                                None => ui.label("validating..."),
+                            match (row.heldout_rms_m, row.jumps_left_out) {
+                                (Some(h), 0) => ui.label(format!("{h:.3} m")),
+                                (Some(h), jumps) => ui
+                                    .label(format!("{h:.3} m ({jumps} out)"))
+                                    .on_hover_text(format!(
+                                        "{jumps} fixes more than 5 times the median misfit (at least 10 m) from this model's fitted path are GPS jumps, left out of its held-out RMS"
+                                    )),
+                                (None, _) => ui.label("validating..."),
                             };
                             ui.end_row();
                         }

@@ -101,8 +101,11 @@ pub struct HistoryRow {
     pub segment_s: f64,
     pub params: usize,
     pub fit_rms_m: f64,
-    /// Held-out error, filled in by a background validation.
+    /// Held-out error over the fixes that are not GPS jumps, filled in by a
+    /// background validation of this fit as it is (its own noise settings).
     pub heldout_rms_m: Option<f64>,
+    /// Fixes that validation left out as GPS jumps.
+    pub jumps_left_out: usize,
     pub iterations: usize,
 }
 
@@ -250,30 +253,27 @@ impl GyropathApp {
                 }
                 Update::Exported(p) => self.status = Some(format!("wrote {p}")),
                 Update::DiagnosisProgress(p) => self.diagnosing = Some(p),
+                // The diagnosis's own held-out error is of a refit under the
+                // noise as set: it stays in the diagnosis panel, and the
+                // history keeps one kind of number, its own validation's.
                 Update::Diagnosis(d) => {
                     self.diagnosing = None;
-                    if let Some(row) = self
-                        .history
-                        .iter_mut()
-                        .rev()
-                        .find(|r| r.model == d.model.join(", "))
-                    {
-                        row.heldout_rms_m = Some(d.heldout_rms_m);
-                    }
                     self.diagnosis = Some(*d);
                 }
                 Update::HeldOut {
                     model,
                     params,
-                    rms_m,
+                    held_out,
                 } => {
                     if let Some(row) = self
                         .history
                         .iter_mut()
                         .rev()
                         .find(|r| r.model == model && r.params == params)
+                        .filter(|r| r.heldout_rms_m.is_none())
                     {
-                        row.heldout_rms_m.get_or_insert(rms_m);
+                        row.heldout_rms_m = Some(held_out.rms_m);
+                        row.jumps_left_out = held_out.jumps_left_out;
                     }
                 }
             }
@@ -297,6 +297,7 @@ impl GyropathApp {
             params: s.n_params,
             fit_rms_m: s.stats.rms_horizontal_m,
             heldout_rms_m: None,
+            jumps_left_out: 0,
             iterations: s.history.len(),
         };
         let same = self.history.last().is_some_and(|r| {

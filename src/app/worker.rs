@@ -12,8 +12,8 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::time::{Duration, Instant};
 
 use crate::diagnosis::{
-    Diagnosis, FixResidual, Folds, ResidualRms, SegmentBias, diagnose_fitted, fix_residuals,
-    held_out, segment_biases,
+    Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
+    fix_residuals, held_out_rms, segment_biases,
 };
 use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
@@ -174,7 +174,7 @@ pub enum Update {
     HeldOut {
         model: String,
         params: usize,
-        rms_m: f64,
+        held_out: HeldOutRms,
     },
 }
 
@@ -445,14 +445,13 @@ impl Worker {
         let tx = self.tx.clone();
         let wake = self.wake_handle();
         std::thread::spawn(move || {
-            let Ok(ho) = held_out(&model, &theta, &settings, &Folds::default()) else {
+            let Ok(held_out) = held_out_rms(&model, &theta, &settings, &Folds::default()) else {
                 return;
             };
-            let all = vec![true; ho.errors.len()];
             let _ = tx.send(Update::HeldOut {
                 model: model.effect_ids().join(", "),
                 params: model.n_params(),
-                rms_m: ho.rms(&all),
+                held_out,
             });
             wake();
         });

@@ -11,7 +11,7 @@ pub mod whiteness;
 pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
 pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
-pub use validation::{Folds, HeldOut, held_out};
+pub use validation::{Folds, HeldOut, HeldOutRms, held_out, held_out_rms};
 pub use whiteness::{Whiteness, whiteness};
 
 use crate::effects::DEG_PER_RAD;

@@ -45,7 +45,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::validation::{ErrorLaw, Folds, HeldOut, fix_errors, held_out};
+use super::validation::{ErrorLaw, Folds, HeldOut, comparable_fixes, fix_errors, held_out};
 use super::{ResidualRms, fix_residuals};
 use crate::effects::{self, Role};
 use crate::model::{Model, ModelSpec};
@@ -183,7 +183,7 @@ pub fn diagnose_fitted(
     let base_rms = base.rms(&use_fix);
     // The robust score's scale: twice the base fit's median misfit, so that
     // fixes within the GPS noise count quadratically and a jump logarithmically.
-    let scale = 2.0 * median(&fit_errors);
+    let scale = 2.0 * crate::statistics::median_of_finite(&fit_errors);
 
     let channels: Vec<String> = sig.channels.iter().map(|(n, _)| n.clone()).collect();
     let present = model.effect_ids();
@@ -238,16 +238,6 @@ pub fn diagnose_fitted(
 
 fn rms(v: &[f64]) -> f64 {
     (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt()
-}
-
-/// Fixes used in the held-out comparison: not GPS jumps, judged by how far
-/// each fix is from the base model's fitted path.
-fn comparable_fixes(errors: &[f64]) -> Vec<bool> {
-    let limit = (5.0 * median(errors)).max(10.0);
-    errors
-        .iter()
-        .map(|&e| e.is_finite() && e <= limit)
-        .collect()
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -340,15 +330,6 @@ fn candidate(
         estimate,
         explanation,
         error: None,
-    }
-}
-
-/// The median of the finite values, 0 for none.
-fn median(v: &[f64]) -> f64 {
-    let mut finite: Vec<f64> = v.iter().copied().filter(|e| e.is_finite()).collect();
-    match crate::statistics::median(&mut finite) {
-        m if m.is_nan() => 0.0,
-        m => m,
     }
 }
 
@@ -551,17 +532,6 @@ mod tests {
             ),
             vec![2.0]
         );
-    }
-
-    #[test]
-    fn jumps_are_left_out_of_the_comparison() {
-        let mut e = vec![2.0; 100];
-        e[5] = 35.0;
-        e[6] = 9.0;
-        let use_fix = comparable_fixes(&e);
-        assert!(!use_fix[5]);
-        assert!(use_fix[6]);
-        assert_eq!(use_fix.iter().filter(|&&u| u).count(), 99);
     }
 
     #[test]

@@ -249,6 +249,42 @@ impl ErrorLaw {
     }
 }
 
+/// Fixes a held-out RMS is taken over: not GPS jumps, judged by how far
+/// each fix is from the model's own fitted path (`errors`, from
+/// [`fix_errors`]): more than `max(5 x median, 10 m)`. A jump of 70 m would
+/// otherwise outweigh a hundred fixes within the noise.
+pub fn comparable_fixes(errors: &[f64]) -> Vec<bool> {
+    let limit = (5.0 * crate::statistics::median_of_finite(errors)).max(10.0);
+    errors
+        .iter()
+        .map(|&e| e.is_finite() && e <= limit)
+        .collect()
+}
+
+/// The held-out error of a fitted model over its comparable fixes, as the
+/// model history shows it and `diagnose` reports for its base model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeldOutRms {
+    pub rms_m: f64,
+    /// Fixes left out as GPS jumps (see [`comparable_fixes`]).
+    pub jumps_left_out: usize,
+}
+
+/// [`held_out`] of `model` fitted at `theta`, as RMS over its comparable fixes.
+pub fn held_out_rms(
+    model: &Model,
+    theta: &[f64],
+    settings: &FitSettings,
+    folds: &Folds,
+) -> Result<HeldOutRms, FitError> {
+    let ho = held_out(model, theta, settings, folds)?;
+    let use_fix = comparable_fixes(&fix_errors(model, theta));
+    Ok(HeldOutRms {
+        rms_m: ho.rms(&use_fix),
+        jumps_left_out: use_fix.iter().filter(|&&u| !u).count(),
+    })
+}
+
 /// Misfit (m) of every fix for parameters `theta` of `model`: the horizontal
 /// distance, and with a barometer also its vertical residual
 /// (`sqrt(h^2 + v^2)`). The barometer is precise to decimetres, so it adds
@@ -398,6 +434,17 @@ mod tests {
             loss[1..11].iter().filter(|&&s| s > 0.0).count() >= 8,
             "{loss:?}"
         );
+    }
+
+    #[test]
+    fn jumps_are_left_out_of_the_comparison() {
+        let mut e = vec![2.0; 100];
+        e[5] = 35.0;
+        e[6] = 9.0;
+        let use_fix = comparable_fixes(&e);
+        assert!(!use_fix[5]);
+        assert!(use_fix[6]);
+        assert_eq!(use_fix.iter().filter(|&&u| u).count(), 99);
     }
 
     /// `n` standard normal draws (Box-Muller over a fixed LCG, so the test cannot flake).

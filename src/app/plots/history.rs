@@ -86,6 +86,7 @@ mod tests {
             params: 3,
             fit_rms_m: fit,
             heldout_rms_m: h,
+            jumps_left_out: 0,
             iterations: 9,
         };
         let (heldout, fit) =
