@@ -233,7 +233,7 @@ fn diagnose_add_and_watch_the_held_out_error_fall(file: &str, effect: &str) {
         step_until(&mut h, Duration::from_secs(120), |a| a
             .history
             .first()
-            .is_some_and(|r| r.heldout_rms_m.is_some())),
+            .is_some_and(|r| r.held_out.is_some())),
         "first fit and its validation"
     );
     let first = h.state().history[0].clone();
@@ -253,7 +253,7 @@ fn diagnose_add_and_watch_the_held_out_error_fall(file: &str, effect: &str) {
         .click();
     assert!(
         step_until(&mut h, Duration::from_secs(120), |a| a.history.len() == 2
-            && a.history[1].heldout_rms_m.is_some()),
+            && a.history[1].held_out.is_some()),
         "refit with the effect: history {:?}, error {:?}, running {}, phase {:?}",
         h.state().history,
         h.state().error,
@@ -266,15 +266,16 @@ fn diagnose_add_and_watch_the_held_out_error_fall(file: &str, effect: &str) {
     let second = h.state().history[1].clone();
     assert!(second.model.contains(effect), "{second:?}");
     // The diagnosis did not overwrite the history's own validation.
-    assert_eq!(h.state().history[0].heldout_rms_m, first.heldout_rms_m);
+    assert_eq!(h.state().history[0].held_out, first.held_out);
     let (before, after) = (
-        first.heldout_rms_m.expect("held-out"),
-        second.heldout_rms_m.expect("held-out"),
+        first.held_out.expect("held-out"),
+        second.held_out.expect("held-out"),
     );
     eprintln!(
-        "{file}: held-out {before:.3} -> {after:.3} m ({} -> {} jumps out)",
-        first.jumps_left_out, second.jumps_left_out
+        "{file}: held-out {:.3} -> {:.3} m ({} -> {} jumps out)",
+        before.rms_m, after.rms_m, before.jumps_left_out, after.jumps_left_out
     );
+    let (before, after) = (before.rms_m, after.rms_m);
     assert!(after < 0.9 * before, "held-out {before} -> {after}");
     h.get_by_label_contains(&format!("{after:.3} m"));
 }

@@ -12,7 +12,7 @@ impl GyropathApp {
             );
             return;
         }
-        if self.history.iter().any(|r| r.heldout_rms_m.is_some()) {
+        if self.history.iter().any(|r| r.held_out.is_some()) {
             plots::history_ui(ui, &self.history, 110.0);
         }
         egui::ScrollArea::vertical()
@@ -39,14 +39,14 @@ impl GyropathApp {
                             ui.label(format!("{}", row.params));
                             ui.label(format!("{}", row.iterations));
                             ui.label(format!("{:.3} m", row.fit_rms_m));
-                            match (row.heldout_rms_m, row.jumps_left_out) {
-                                (Some(h), 0) => ui.label(format!("{h:.3} m")),
-                                (Some(h), jumps) => ui
+                            match row.held_out.map(|h| (h.rms_m, h.jumps_left_out)) {
+                                Some((h, 0)) => ui.label(format!("{h:.3} m")),
+                                Some((h, jumps)) => ui
                                     .label(format!("{h:.3} m ({jumps} out)"))
                                     .on_hover_text(format!(
                                         "{jumps} fixes more than 5 times the median misfit (at least 10 m) from this model's fitted path are GPS jumps, left out of its held-out RMS"
                                     )),
-                                (None, _) => ui.label("validating..."),
+                                None => ui.label("validating..."),
                             };
                             ui.end_row();
                         }

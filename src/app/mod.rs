@@ -27,6 +27,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender};
 
+use crate::diagnosis::HeldOutRms;
 use crate::effects;
 use crate::optimisation::{FitSettings, Phase};
 use worker::{ExportKind, Request, RideSource, RideView, Snapshot, Update, WorkerHandle};
@@ -101,11 +102,10 @@ pub struct HistoryRow {
     pub segment_s: f64,
     pub params: usize,
     pub fit_rms_m: f64,
-    /// Held-out error over the fixes that are not GPS jumps, filled in by a
-    /// background validation of this fit as it is (its own noise settings).
-    pub heldout_rms_m: Option<f64>,
-    /// Fixes that validation left out as GPS jumps.
-    pub jumps_left_out: usize,
+    /// Held-out error over the fixes that are not GPS jumps (and how many
+    /// were left out), filled in by a background validation of this fit as
+    /// it is (its own noise settings).
+    pub held_out: Option<HeldOutRms>,
     pub iterations: usize,
 }
 
@@ -270,10 +270,9 @@ impl GyropathApp {
                         .iter_mut()
                         .rev()
                         .find(|r| r.model == model && r.params == params)
-                        .filter(|r| r.heldout_rms_m.is_none())
+                        .filter(|r| r.held_out.is_none())
                     {
-                        row.heldout_rms_m = Some(held_out.rms_m);
-                        row.jumps_left_out = held_out.jumps_left_out;
+                        row.held_out = Some(held_out);
                     }
                 }
             }
@@ -296,8 +295,7 @@ impl GyropathApp {
             segment_s: self.settings.fit.model.segment_s,
             params: s.n_params,
             fit_rms_m: s.stats.rms_horizontal_m,
-            heldout_rms_m: None,
-            jumps_left_out: 0,
+            held_out: None,
             iterations: s.history.len(),
         };
         let same = self.history.last().is_some_and(|r| {

@@ -180,7 +180,7 @@ pub fn diagnose_fitted(
     let fit_errors = fix_errors(model, theta);
     let fit_rms = rms(&fit_errors);
     let use_fix = comparable_fixes(&fit_errors);
-    let base_rms = base.rms(&use_fix);
+    let base_rms = base.comparable_rms(&use_fix);
     // The robust score's scale: twice the base fit's median misfit, so that
     // fixes within the GPS noise count quadratically and a jump logarithmically.
     let scale = 2.0 * crate::statistics::median_of_finite(&fit_errors);
@@ -198,7 +198,15 @@ pub fn diagnose_fitted(
         .par_iter()
         .map(|id| {
             let c = candidate(
-                model, theta, settings, folds, id, &base, &use_fix, base_rms, scale,
+                model,
+                theta,
+                settings,
+                folds,
+                id,
+                &base,
+                &use_fix,
+                base_rms.rms_m,
+                scale,
             );
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(&format!("tried {id} ({n} of {})", ids.len()));
@@ -224,10 +232,10 @@ pub fn diagnose_fitted(
     Ok(Diagnosis {
         model: present,
         fit_rms_m: fit_rms,
-        heldout_rms_m: base_rms,
+        heldout_rms_m: base_rms.rms_m,
         residual_rms: ResidualRms::of(&residuals),
         folds: *folds,
-        excluded_fixes: use_fix.iter().filter(|&&u| !u).count(),
+        excluded_fixes: base_rms.jumps_left_out,
         ranking,
         estimate: estimates(model, theta, None, &base.fold_params),
         structure: super::structure(model, theta),
@@ -484,12 +492,7 @@ fn explain(
         ),
         "gps_outliers" => {
             let res = fix_residuals(model, theta, &model.residual_path(theta));
-            let scale = model
-                .effects()
-                .iter()
-                .find_map(|e| e.robust_scale())
-                .unwrap_or(1.0)
-                * model.spec.sigma_horizontal_m;
+            let scale = model.robust_scale().unwrap_or(1.0) * model.spec.sigma_horizontal_m;
             let far = res.iter().filter(|r| r.horizontal() > 3.0 * scale).count();
             format!(
                 "{far} of {} fixes sit more than {:.0} m from the robust path (multipath jumps); a Cauchy loss stops them bending it",

@@ -130,6 +130,15 @@ impl HeldOut {
         }
     }
 
+    /// RMS over the withheld fixes that `use_fix` keeps (see
+    /// [`comparable_fixes`]), with how many it leaves out as GPS jumps.
+    pub fn comparable_rms(&self, use_fix: &[bool]) -> HeldOutRms {
+        HeldOutRms {
+            rms_m: self.rms(use_fix),
+            jumps_left_out: use_fix.iter().filter(|&&u| !u).count(),
+        }
+    }
+
     /// Predictive log-likelihood per block: `sum ln p(e_k)` over the block's
     /// withheld fixes under `law` at the scale that fits all of them best
     /// (one parameter, as a noise model's sigma is fitted); `None` for blocks
@@ -193,7 +202,7 @@ impl ErrorLaw {
     /// The law of a model's GPS errors: Cauchy when an effect gives the GPS
     /// rows a robust loss, else Gaussian.
     pub fn of(model: &Model) -> Self {
-        if model.effects().iter().any(|e| e.robust_scale().is_some()) {
+        if model.robust_scale().is_some() {
             ErrorLaw::Cauchy
         } else {
             ErrorLaw::Gaussian
@@ -278,11 +287,7 @@ pub fn held_out_rms(
     folds: &Folds,
 ) -> Result<HeldOutRms, FitError> {
     let ho = held_out(model, theta, settings, folds)?;
-    let use_fix = comparable_fixes(&fix_errors(model, theta));
-    Ok(HeldOutRms {
-        rms_m: ho.rms(&use_fix),
-        jumps_left_out: use_fix.iter().filter(|&&u| !u).count(),
-    })
+    Ok(ho.comparable_rms(&comparable_fixes(&fix_errors(model, theta))))
 }
 
 /// Misfit (m) of every fix for parameters `theta` of `model`: the horizontal

@@ -12,7 +12,7 @@ pub fn history_series(history: &[HistoryRow]) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) 
     let heldout = history
         .iter()
         .enumerate()
-        .filter_map(|(i, r)| r.heldout_rms_m.map(|h| [(i + 1) as f64, h]))
+        .filter_map(|(i, r)| r.held_out.map(|h| [(i + 1) as f64, h.rms_m]))
         .collect();
     let fit = history
         .iter()
@@ -77,6 +77,7 @@ pub fn history_ui(ui: &mut egui::Ui, history: &[HistoryRow], height: f32) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::diagnosis::HeldOutRms;
 
     #[test]
     fn the_chart_has_a_held_out_point_per_validated_model() {
@@ -85,8 +86,10 @@ mod tests {
             segment_s: 5.0,
             params: 3,
             fit_rms_m: fit,
-            heldout_rms_m: h,
-            jumps_left_out: 0,
+            held_out: h.map(|rms_m| HeldOutRms {
+                rms_m,
+                jumps_left_out: 0,
+            }),
             iterations: 9,
         };
         let (heldout, fit) =
