@@ -8,8 +8,10 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use gyropath::diagnosis::{Diagnosis, Folds, limits};
-use gyropath::export::{FitReport, write_atomically, write_path_csv};
+use gyropath::diagnosis::{Diagnosis, Folds, limits, reference};
+use gyropath::export::{
+    FitReport, PathFormat, check_report_name, write_atomically, write_path_csv, write_path_gpx,
+};
 use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
 use gyropath::optimisation::{
@@ -159,6 +161,12 @@ pub struct FitArgs {
     /// Write the fit report here (JSON).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// A better track of the same drive to measure the path against (RTK, an
+    /// INS): `t_s,lat_deg,lon_deg[,alt_m]` CSV on the ride's clock. In a batch
+    /// a file name that does not exist is looked up beside each ride
+    /// (`--reference truth.csv`). Example: `gyropath fit ride.csv --reference truth.csv`.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(long, short)]
     pub quiet: bool,
@@ -175,6 +183,10 @@ pub struct DiagnoseArgs {
     /// Write the diagnosis here (JSON).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// A better track of the same drive (`t_s,lat_deg,lon_deg[,alt_m]` CSV on
+    /// the ride's clock): the model and every candidate are measured against it.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
     /// Number of validation folds.
     #[arg(long, default_value_t = 5)]
     pub folds: usize,
@@ -192,9 +204,13 @@ pub struct DiagnoseArgs {
 /// The model and optimiser options shared by `fit` and `diagnose`.
 #[derive(Debug, Args)]
 pub struct SettingsArgs {
-    /// Effects of the model, comma separated (`paper` = the paper's five; catalogue:
-    /// gyro_scale, gps_lag, mount_misalignment, gyro_bias_channel:<column>, baro_drift, gps_outliers).
-    #[arg(long, default_value = "paper")]
+    /// Effects added to the paper's model (its five: initial_position,
+    /// initial_orientation, odometer_gain, gyro_bias, gyro_bias_segments), comma
+    /// separated; `-ID` takes one out. Catalogue: gyro_scale, gps_lag,
+    /// mount_misalignment, gyro_bias_channel:<column>, baro_drift, gps_outliers.
+    /// Example: `--effects gps_lag` fits the paper's model plus a GPS lag;
+    /// `--effects=-odometer_gain` takes the odometer as calibrated.
+    #[arg(long, default_value = "paper", allow_hyphen_values = true)]
     pub effects: String,
     /// Length of a bias segment (s).
     #[arg(long, default_value_t = 5.0)]
@@ -322,7 +338,9 @@ impl SettingsArgs {
                 walk: self.bias_walk.trim() == "auto",
             },
             model: ModelSpec {
-                effects: split_list(&self.effects),
+                effects: std::iter::once("paper".to_string())
+                    .chain(split_list(&self.effects))
+                    .collect(),
                 segment_s: self.segment_s,
                 bias_walk_dps_sqrt_s: walk,
                 sigma_horizontal_m: sigma,
@@ -411,12 +429,32 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     let ride = &args.rides[0];
     let started = Instant::now();
     let settings = args.settings.settings()?;
+    // The outputs' names are checked before the fit, not after minutes of it.
+    let path_format = args.out.as_deref().map(PathFormat::of).transpose()?;
+    if let Some(rep) = &args.report {
+        check_report_name(rep)?;
+    }
+    let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(on_stdout);
+    if to_stdout(&args.out) && to_stdout(&args.report) {
+        anyhow::bail!("--out and --report cannot both go to standard output");
+    }
+    let data_on_stdout = to_stdout(&args.out) || to_stdout(&args.report);
+    let reference = args
+        .reference
+        .as_deref()
+        .map(import::read_reference)
+        .transpose()?;
     let signals = Arc::new(load_signals(ride, &args.source, args.quiet)?);
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
         }
     }
+    // A reference of another drive is refused before the fit.
+    let matched = reference
+        .as_ref()
+        .map(|r| reference::match_rows(&signals, r))
+        .transpose()?;
     let mut fit = Reconstruction::new(signals, settings)?;
     let terminal = std::io::stderr().is_terminal() && !args.quiet;
     let bar = terminal.then(|| {
@@ -441,25 +479,65 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         .then(|| fit.model().uncertainty(fit.params()))
         .flatten();
     let elapsed = started.elapsed().as_secs_f64();
-    let report = match &uncertainty {
+    let mut report = match &uncertainty {
         Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
         None => FitReport::new(&fit, elapsed),
     };
-    if let Some(out) = &args.out {
-        write_atomically(out, Some(ride), |w| {
-            write_path_csv(w, fit.model(), fit.params(), uncertainty.as_ref())
-        })?;
+    if let (Some(r), Some(m)) = (&reference, &matched) {
+        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
+    }
+    if let (Some(out), Some(format)) = (&args.out, path_format) {
+        write_path(out, format, ride, &fit, uncertainty.as_ref())?;
     }
     if let Some(rep) = &args.report {
-        write_atomically(rep, Some(ride), |w| {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
-            writeln!(w)
-        })?;
+        write_report(rep, ride, &report)?;
     }
     if !args.quiet {
-        print_summary(&report);
+        // Data on standard output: the summary goes to standard error.
+        let summary = summary_text(&report);
+        if data_on_stdout {
+            eprint!("{summary}");
+        } else {
+            print!("{summary}");
+        }
     }
     Ok(())
+}
+
+/// Write the fitted path to `out` in `format`.
+fn write_path(
+    out: &Path,
+    format: PathFormat,
+    ride: &Path,
+    fit: &Reconstruction,
+    uncertainty: Option<&gyropath::model::Uncertainty>,
+) -> Result<()> {
+    match format {
+        PathFormat::Csv => write_atomically(out, Some(ride), |w| {
+            write_path_csv(w, fit.model(), fit.params(), uncertainty)
+        }),
+        PathFormat::Gpx => {
+            let trajectory = fit.trajectory();
+            write_atomically(out, Some(ride), |w| {
+                write_path_gpx(w, fit.model(), &trajectory)
+            })
+        }
+    }
+    .context("the path could not be written")
+}
+
+/// Whether an output named `path` goes to standard output.
+fn on_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-" || path == Path::new("/dev/stdout")
+}
+
+/// Write a JSON report to `out`.
+fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Result<()> {
+    write_atomically(out, Some(ride), |w| {
+        serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)?;
+        writeln!(w)
+    })
+    .context("the report could not be written")
 }
 
 /// A fit beyond the physical limits is a failure, with its likely cause,
@@ -471,8 +549,13 @@ fn physical(fit: &Reconstruction) -> Result<()> {
     }
     let lines: Vec<String> = broken.iter().map(|v| format!("  {v}")).collect();
     anyhow::bail!(
-        "{}: the fit failed: it is not physical, although its path is {:.2} m from the fixes:\n{}",
+        "{}: the fit failed: it is {} (its path is {:.2} m RMS from the fixes):\n{}",
         fit.model().signals.source,
+        if limits::parameters(fit.model(), fit.params()).is_empty() {
+            "no result"
+        } else {
+            "not physical"
+        },
         fit.stats().rms_horizontal_m,
         lines.join("\n")
     )
@@ -513,38 +596,110 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     Ok(rides)
 }
 
-/// Fit one ride of a batch and write its outputs into `out_dir`.
+/// The names of a batch's outputs, one per ride: the ride's file stem, with
+/// as many of its folders before it as it takes to tell it from every other
+/// ride (`comma/ride.csv` and `berlin/ride.csv` become `comma-ride` and
+/// `berlin-ride`), so one ride's outputs never overwrite another's. The same
+/// ride given twice is an error that names it.
+fn output_stems(rides: &[PathBuf]) -> Result<Vec<String>> {
+    let parts: Vec<Vec<String>> = rides
+        .iter()
+        .map(|ride| {
+            let absolute = std::path::absolute(ride).unwrap_or_else(|_| ride.clone());
+            let mut parts: Vec<String> = absolute
+                .parent()
+                .into_iter()
+                .flat_map(|p| p.components())
+                .filter_map(|c| match c {
+                    std::path::Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                    _ => None,
+                })
+                .collect();
+            parts.push(
+                absolute
+                    .file_stem()
+                    .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned()),
+            );
+            parts
+        })
+        .collect();
+    let name = |p: &[String], k: usize| p[p.len() - k.min(p.len())..].join("-");
+    let mut depth = vec![1usize; rides.len()];
+    loop {
+        let names: Vec<String> = (0..rides.len())
+            .map(|i| name(&parts[i], depth[i]))
+            .collect();
+        let twin = |i: usize| (0..rides.len()).find(|&j| j != i && names[j] == names[i]);
+        let clashing: Vec<usize> = (0..rides.len()).filter(|&i| twin(i).is_some()).collect();
+        if clashing.is_empty() {
+            return Ok(names);
+        }
+        if let Some(&i) = clashing.iter().find(|&&i| depth[i] >= parts[i].len()) {
+            anyhow::bail!(
+                "{} and {} would write the same outputs ({}-path.csv): give each ride once",
+                rides[twin(i).unwrap_or(i)].display(),
+                rides[i].display(),
+                names[i]
+            );
+        }
+        for i in clashing {
+            depth[i] += 1;
+        }
+    }
+}
+
+/// A batch ride's reference: `reference` itself where it exists, else a file
+/// of that name beside the ride (none if there is none).
+fn reference_for(ride: &Path, reference: Option<&Path>) -> Option<PathBuf> {
+    let r = reference?;
+    if r.exists() {
+        return Some(r.to_path_buf());
+    }
+    let beside = ride.parent().unwrap_or(Path::new(".")).join(r);
+    beside.is_file().then_some(beside)
+}
+
+/// Fit one ride of a batch and write its outputs into `out_dir` as
+/// `STEM-path.csv` and `STEM-report.json` (nothing without an `out_dir`).
 fn fit_one(
     ride: &Path,
     source: &SourceArgs,
     settings: &FitSettings,
-    out_dir: &Path,
+    out_dir: Option<&Path>,
+    stem: &str,
+    reference: Option<&Path>,
 ) -> Result<FitReport> {
     let started = Instant::now();
+    let reference = reference_for(ride, reference)
+        .map(|p| import::read_reference(&p))
+        .transpose()?;
     let signals = Arc::new(load_signals(ride, source, true)?);
+    let matched = reference
+        .as_ref()
+        .map(|r| reference::match_rows(&signals, r))
+        .transpose()?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;
     let uncertainty = fit.model().uncertainty(fit.params());
     let elapsed = started.elapsed().as_secs_f64();
-    let report = match &uncertainty {
+    let mut report = match &uncertainty {
         Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
         None => FitReport::new(&fit, elapsed),
     };
-    let stem = ride
-        .file_stem()
-        .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned());
-    write_atomically(&out_dir.join(format!("{stem}-path.csv")), Some(ride), |w| {
-        write_path_csv(w, fit.model(), fit.params(), uncertainty.as_ref())
-    })?;
-    write_atomically(
-        &out_dir.join(format!("{stem}-report.json")),
-        Some(ride),
-        |w| {
-            serde_json::to_writer_pretty(&mut *w, &report).map_err(std::io::Error::other)?;
-            writeln!(w)
-        },
-    )?;
+    if let (Some(r), Some(m)) = (&reference, &matched) {
+        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
+    }
+    if let Some(dir) = out_dir {
+        write_path(
+            &dir.join(format!("{stem}-path.csv")),
+            PathFormat::Csv,
+            ride,
+            &fit,
+            uncertainty.as_ref(),
+        )?;
+        write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
+    }
     Ok(report)
 }
 
@@ -556,17 +711,30 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
     if args.out.is_some() || args.report.is_some() {
         anyhow::bail!("with several rides use --out-dir instead of --out/--report");
     }
-    let out_dir = args.out_dir.clone().unwrap_or_else(|| PathBuf::from("."));
-    std::fs::create_dir_all(&out_dir)
-        .with_context(|| format!("cannot create {}", out_dir.display()))?;
+    // Without --out-dir a batch writes no files: a folder of rides must not
+    // scatter outputs into the working directory.
+    let out_dir = args.out_dir.as_deref();
+    if let Some(dir) = out_dir {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    }
     let settings = args.settings.settings()?;
     let rides = collect_rides(&args.rides)?;
+    let stems = output_stems(&rides)?;
     let started = Instant::now();
     let rows: Vec<BatchRow> = rides
         .par_iter()
-        .map(|ride| {
-            let outcome =
-                fit_one(ride, &args.source, &settings, &out_dir).map_err(|e| format!("{e:#}"));
+        .zip(stems.par_iter())
+        .map(|(ride, stem)| {
+            let outcome = fit_one(
+                ride,
+                &args.source,
+                &settings,
+                out_dir,
+                stem,
+                args.reference.as_deref(),
+            )
+            .map_err(|e| format!("{e:#}"));
             if !args.quiet {
                 eprintln!(
                     "{} {}",
@@ -581,8 +749,8 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
         })
         .collect();
     println!(
-        "{:<40} {:>8} {:>6} {:>9} {:>9} {:>9} {:>8}",
-        "ride", "min", "fixes", "fit RMS", "vert RMS", "yaw bias", "gain"
+        "{:<40} {:>8} {:>6} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "ride", "min", "fixes", "fit RMS", "vert RMS", "yaw bias", "gain", "ref RMS"
     );
     let mut failed = 0;
     for row in &rows {
@@ -591,7 +759,7 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
                 let value = |e: &str, n: &str| r.value(e, n).unwrap_or(f64::NAN);
                 let vertical = r.stats.rms_baro_up_m.or(r.stats.rms_gps_up_m);
                 println!(
-                    "{:<40} {:>8.1} {:>6} {:>7.3} m {:>9} {:>5.3}°/s {:>8.4}",
+                    "{:<40} {:>8.1} {:>6} {:>7.3} m {:>9} {:>5.3}°/s {:>8.4} {:>9}",
                     row.ride,
                     r.duration_s / 60.0,
                     r.gps_fixes,
@@ -599,6 +767,9 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
                     vertical.map_or("-".into(), |v| format!("{v:.3} m")),
                     value("gyro_bias", "bias_z"),
                     value("odometer_gain", "gain"),
+                    r.reference
+                        .as_ref()
+                        .map_or("-".into(), |c| format!("{:.3} m", c.horizontal.rms_m)),
                 );
             }
             Err(e) => {
@@ -608,13 +779,16 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
         }
     }
     println!(
-        "{} rides, {} fitted, {} failed, {:.1} s on {} threads; outputs in {}",
+        "{} rides, {} fitted, {} failed, {:.1} s on {} threads; {}",
         rows.len(),
         rows.len() - failed,
         failed,
         started.elapsed().as_secs_f64(),
         rayon::current_num_threads(),
-        out_dir.display()
+        match out_dir {
+            Some(d) => format!("outputs in {}", d.display()),
+            None => "no files written (--out-dir DIR keeps each ride's path and report)".into(),
+        }
     );
     if failed > 0 {
         anyhow::bail!("{failed} of {} rides could not be fitted", rows.len());
@@ -626,25 +800,32 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
 /// length over another (a likelihood ratio of about 7).
 const SEGMENT_EVIDENCE: f64 = 4.0;
 
-fn print_summary(r: &FitReport) {
-    println!(
+/// The terminal summary of a fit.
+fn summary_text(r: &FitReport) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    _ = writeln!(
+        out,
         "ride      {} ({} rows, {:.0} s, {} GPS fixes)",
         r.source, r.rows, r.duration_s, r.gps_fixes
     );
-    println!("model     {}", r.model.join(", "));
-    println!("attitude  {}", r.attitude);
+    _ = writeln!(out, "model     {}", r.model.join(", "));
+    _ = writeln!(out, "attitude  {}", r.attitude);
     match &r.noise {
-        Some(n) => println!("noise     from the ride: {}", n.describe()),
-        None => println!(
-            "noise     GPS sigma {:.2} m, {}, bias walk {} (set)",
-            r.gps_sigma_m,
-            r.gps_tau_s.map_or("independent fixes".into(), |t| format!(
-                "correlated over {t:.0} s, jitter {:.2} m",
-                r.gps_white_m
-            )),
-            r.bias_walk
-                .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))
-        ),
+        Some(n) => _ = writeln!(out, "noise     from the ride: {}", n.describe()),
+        None => {
+            _ = writeln!(
+                out,
+                "noise     GPS sigma {:.2} m, {}, bias walk {} (set)",
+                r.gps_sigma_m,
+                r.gps_tau_s.map_or("independent fixes".into(), |t| format!(
+                    "correlated over {t:.0} s, jitter {:.2} m",
+                    r.gps_white_m
+                )),
+                r.bias_walk
+                    .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))
+            )
+        }
     }
     if let Some(&(best, _)) = r.segment_preference.iter().find(|v| v.1 == 0.0) {
         let spread = r.segment_preference.iter().map(|v| v.1).fold(0.0, f64::max);
@@ -654,42 +835,54 @@ fn print_summary(r: &FitReport) {
             .map(|(s, d)| format!("{s} s {d:+.1}"))
             .collect();
         if spread < SEGMENT_EVIDENCE {
-            println!(
+            _ = writeln!(
+                out,
                 "segments  no length preferred ({}, -2 ln L): the bias walk sets the smoothing",
                 lengths.join(", ")
             );
         } else {
-            println!(
+            _ = writeln!(
+                out,
                 "segments  the ride prefers {best} s ({}, -2 ln L)",
                 lengths.join(", ")
             );
         }
     }
-    println!(
+    _ = writeln!(
+        out,
         "iters     step 1: {}, step 2: {}",
         r.iterations_step1, r.iterations_step2
     );
-    println!("cost      {:.4}", r.stats.cost);
-    println!("rms       horizontal {:.3} m", r.stats.rms_horizontal_m);
+    _ = writeln!(out, "cost      {:.4}", r.stats.cost);
+    _ = writeln!(
+        out,
+        "rms       horizontal {:.3} m",
+        r.stats.rms_horizontal_m
+    );
     if let Some(v) = r.stats.rms_gps_up_m {
-        println!("          GPS altitude {v:.3} m");
+        _ = writeln!(out, "          GPS altitude {v:.3} m");
     }
     if let Some(v) = r.stats.rms_baro_up_m {
-        println!("          barometer {v:.3} m");
+        _ = writeln!(out, "          barometer {v:.3} m");
     }
     for (effect, values) in &r.parameters {
         if effect == "gyro_bias_segments" {
             let n = values.len() / 3;
-            println!("{effect}: {n} segments (see --report)");
+            _ = writeln!(out, "{effect}: {n} segments (see --report)");
             continue;
         }
         let list: Vec<String> = values
             .iter()
             .map(|p| format!("{} {}", p.name, p.describe()))
             .collect();
-        println!("{effect}: {}", list.join(", "));
+        _ = writeln!(out, "{effect}: {}", list.join(", "));
     }
-    println!("time      {:.2} s", r.elapsed_s);
+    if let Some(c) = &r.reference {
+        _ = writeln!(out, "reference {}: {}", c.reference, c.coverage());
+        _ = writeln!(out, "          {}", c.describe());
+    }
+    _ = writeln!(out, "time      {:.2} s", r.elapsed_s);
+    out
 }
 
 pub fn simulate(args: &SimulateArgs) -> Result<()> {
@@ -745,18 +938,30 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
 pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     let started = Instant::now();
     let settings = args.settings.settings()?;
+    if let Some(json) = &args.json {
+        check_report_name(json)?;
+    }
     if args.folds < 2 {
         anyhow::bail!("--folds must be at least 2, got {}", args.folds);
     }
     if !(args.block_s.is_finite() && args.block_s >= 5.0) {
         anyhow::bail!("--block-s must be at least 5 s, got {}", args.block_s);
     }
+    let reference = args
+        .reference
+        .as_deref()
+        .map(import::read_reference)
+        .transpose()?;
     let signals = Arc::new(load_signals(&args.ride, &args.source, args.quiet)?);
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
         }
     }
+    let matched = reference
+        .as_ref()
+        .map(|r| reference::match_rows(&signals, r))
+        .transpose()?;
     let folds = Folds {
         block_s: args.block_s,
         k: args.folds,
@@ -768,16 +973,24 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
             eprintln!("{msg}");
         }
     };
-    let diagnosis = gyropath::diagnosis::diagnose(signals, &settings, &folds, &progress)?;
+    let diagnosis = gyropath::diagnosis::diagnose_against(
+        signals,
+        &settings,
+        &folds,
+        reference.as_ref().zip(matched.as_ref()),
+        &progress,
+    )?;
     if let Some(path) = &args.json {
-        write_atomically(path, Some(&args.ride), |w| {
-            serde_json::to_writer_pretty(&mut *w, &diagnosis).map_err(std::io::Error::other)?;
-            writeln!(w)
-        })?;
+        write_report(path, &args.ride, &diagnosis)?;
     }
-    print_diagnosis(&diagnosis);
+    let mut table = diagnosis_text(&diagnosis);
     if !args.quiet {
-        println!("time      {:.2} s", started.elapsed().as_secs_f64());
+        table += &format!("time      {:.2} s\n", started.elapsed().as_secs_f64());
+    }
+    if args.json.as_deref().is_some_and(on_stdout) {
+        eprint!("{table}");
+    } else {
+        print!("{table}");
     }
     if !diagnosis.not_physical.is_empty() {
         anyhow::bail!(
@@ -789,9 +1002,13 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     Ok(())
 }
 
-fn print_diagnosis(d: &Diagnosis) {
-    println!("model     {}", d.model.join(", "));
-    println!(
+/// The terminal table of a diagnosis.
+fn diagnosis_text(d: &Diagnosis) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    _ = writeln!(out, "model     {}", d.model.join(", "));
+    _ = writeln!(
+        out,
         "error     fit {:.3} m, held-out {:.3} m ({}-fold over {:.0} s blocks{})",
         d.fit_rms_m,
         d.heldout_rms_m,
@@ -803,7 +1020,8 @@ fn print_diagnosis(d: &Diagnosis) {
             String::new()
         }
     );
-    println!(
+    _ = writeln!(
+        out,
         "residual  along {:.2} m, cross {:.2} m{}",
         d.residual_rms.along_m,
         d.residual_rms.cross_m,
@@ -811,13 +1029,17 @@ fn print_diagnosis(d: &Diagnosis) {
             .up_m
             .map_or(String::new(), |u| format!(", vertical {u:.2} m"))
     );
+    if let Some(c) = &d.reference {
+        _ = writeln!(out, "reference {}: {}", c.reference, c.coverage());
+        _ = writeln!(out, "          {}", c.describe());
+    }
     let strong: Vec<String> = d
         .structure
         .iter()
         .take(4)
         .map(|c| format!("{} ~ {} r={:+.2}", c.quantity, c.signal, c.r))
         .collect();
-    println!("structure {}", strong.join(", "));
+    _ = writeln!(out, "structure {}", strong.join(", "));
     if let Some(w) = &d.whiteness {
         let parts: Vec<String> = w
             .iter()
@@ -838,16 +1060,32 @@ fn print_diagnosis(d: &Diagnosis) {
                 )
             })
             .collect();
-        println!("whiteness {}", parts.join("; "));
+        _ = writeln!(out, "whiteness {}", parts.join("; "));
     }
-    println!();
-    println!(
-        "{:<5}{:<26}{:>11}{:>8}{:>7}  {:<5}  estimate",
-        "rank", "effect", "held-out", "drop", "t", "sig."
+    _ = writeln!(out);
+    _ = writeln!(
+        out,
+        "{:<5}{:<26}{:>11}{:>8}{:>7}  {:<5}{}  estimate",
+        "rank",
+        "effect",
+        "held-out",
+        "drop",
+        "t",
+        "sig.",
+        if d.reference.is_some() {
+            format!("{:>10}", "to ref")
+        } else {
+            String::new()
+        }
     );
     for (i, c) in d.ranking.iter().enumerate() {
         if let Some(e) = &c.error {
-            println!("{:<5}{:<26}  could not be fitted: {e}", i + 1, c.effect);
+            _ = writeln!(
+                out,
+                "{:<5}{:<26}  could not be fitted: {e}",
+                i + 1,
+                c.effect
+            );
             continue;
         }
         let est: Vec<String> = c
@@ -855,34 +1093,41 @@ fn print_diagnosis(d: &Diagnosis) {
             .iter()
             .map(|(k, e)| format!("{k} {}", e.describe()))
             .collect();
-        println!(
-            "{:<5}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}  {}",
+        _ = writeln!(
+            out,
+            "{:<5}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}{}  {}",
             i + 1,
             c.effect,
             c.heldout_rms_m,
             100.0 * c.drop,
             c.t_statistic,
             if c.significant { "yes" } else { "no" },
+            c.reference
+                .as_ref()
+                .map_or(String::new(), |r| format!("{:>8.3} m", r.horizontal.rms_m)),
             est.join(", ")
         );
     }
     if !d.not_physical.is_empty() {
-        println!();
-        println!(
+        _ = writeln!(out);
+        _ = writeln!(
+            out,
             "not physical: the model's own fit breaks a physical limit (below); fix the axes or units first"
         );
-        return;
+        return out;
     }
     if let Some(best) = d.ranking.first().filter(|c| c.significant) {
-        println!();
-        println!("missing:  {} - {}", best.effect, best.explanation);
+        _ = writeln!(out);
+        _ = writeln!(out, "missing:  {} - {}", best.effect, best.explanation);
     } else {
-        println!();
-        println!(
+        _ = writeln!(out);
+        _ = writeln!(
+            out,
             "nothing significant: no catalogue effect lowers the held-out error beyond chance"
         );
         if let Some(best) = d.ranking.first().filter(|c| c.drop >= 0.02) {
-            println!(
+            _ = writeln!(
+                out,
                 "best:     {} ({:.1} % lower held-out error) - {}",
                 best.effect,
                 100.0 * best.drop,
@@ -890,6 +1135,7 @@ fn print_diagnosis(d: &Diagnosis) {
             );
         }
     }
+    out
 }
 
 pub fn import(args: &ImportArgs) -> Result<()> {
@@ -927,42 +1173,59 @@ pub fn check(args: &CheckArgs) -> Result<()> {
     let mut options = args.options.options()?;
     // The checks read the data as logged; the mounting is what they recommend.
     options.mount = MountChoice::AsLogged;
+    if let Some(json) = &args.json {
+        check_report_name(json)?;
+    }
     let imported = import::open(&args.source, &options)?;
     let report = &imported.check;
-    println!("{} ({})", imported.log.source, imported.kind.label());
+    use std::fmt::Write as _;
+    let mut text = String::new();
+    _ = writeln!(text, "{} ({})", imported.log.source, imported.kind.label());
     if let Some(t) = &imported.topics {
-        println!(
+        _ = writeln!(
+            text,
             "topics    IMU {}, odometer {}, GPS {}",
             t.imu, t.odom, t.fix
         );
     }
     for w in &imported.log.warnings {
-        println!("{:<9} {w}", "note");
+        _ = writeln!(text, "{:<9} {w}", "note");
     }
     for v in &report.verdicts {
-        println!("{:<9} {}: {}", v.level.label(), v.subject, v.message);
+        _ = writeln!(text, "{:<9} {}: {}", v.level.label(), v.subject, v.message);
     }
-    println!();
+    _ = writeln!(text);
     match &report.recommended {
         Some(m) if m.is_identity() => {
-            println!("mounting  as logged: the axes are x forward, y left, z up, in deg/s")
+            _ = writeln!(
+                text,
+                "mounting  as logged: the axes are x forward, y left, z up, in deg/s"
+            )
         }
-        Some(m) => println!(
-            "mounting  recommended: --mount \"{m}\" ({})",
-            match imported.kind.default_mount() {
-                MountChoice::Auto => "bags get it by default",
-                _ => "--mount auto applies it",
-            }
-        ),
+        Some(m) => {
+            _ = writeln!(
+                text,
+                "mounting  recommended: --mount \"{m}\" ({})",
+                match imported.kind.default_mount() {
+                    MountChoice::Auto => "bags get it by default",
+                    _ => "--mount auto applies it",
+                }
+            )
+        }
         None => {
-            println!("mounting  the data cannot tell; read as logged unless --mount says otherwise")
+            _ = writeln!(
+                text,
+                "mounting  the data cannot tell; read as logged unless --mount says otherwise"
+            )
         }
     }
+    if args.json.as_deref().is_some_and(on_stdout) {
+        eprint!("{text}");
+    } else {
+        print!("{text}");
+    }
     if let Some(path) = &args.json {
-        write_atomically(path, Some(&args.source), |w| {
-            serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)?;
-            writeln!(w)
-        })?;
+        write_report(path, &args.source, report)?;
     }
     if report.worst() == Level::Problem && report.recommended.is_none() {
         anyhow::bail!("the log's axes or units contradict its data, and no mounting undoes it");

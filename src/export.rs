@@ -22,9 +22,24 @@ pub enum ExportError {
     },
     #[error("{0}: refusing to write over the input log")]
     WouldOverwriteInput(String),
+    #[error("{path}: unknown {what} format; write {choices}")]
+    UnknownFormat {
+        path: String,
+        what: &'static str,
+        choices: &'static str,
+    },
 }
 
-/// Write through `fill` to a temporary file next to `path`, then rename it over `path`.
+/// Write an output through `fill`, where the user said:
+/// - `-` is standard output;
+/// - a special file (a terminal, a pipe, `/dev/stdout`, `/dev/fd/N`, anything
+///   under `/dev` or `/proc`) is written in place, appending, never replaced:
+///   replacing `/dev/stdout` by a regular file (as root) breaks the machine's
+///   standard output for everyone;
+/// - a regular file is written to a temporary file beside it and renamed over
+///   it, so a crash never leaves half a file; a symbolic link to a regular
+///   file keeps the link and gets its target replaced.
+///
 /// `protect` names a file that must not be overwritten (the input log).
 pub fn write_atomically(
     path: &Path,
@@ -35,17 +50,39 @@ pub fn write_atomically(
         path: path.display().to_string(),
         source,
     };
+    if path.as_os_str() == "-" || path == Path::new("/dev/stdout") {
+        let mut out = std::io::stdout().lock();
+        return fill(&mut out).and_then(|_| out.flush()).map_err(io);
+    }
+    if path == Path::new("/dev/stderr") {
+        let mut out = std::io::stderr().lock();
+        return fill(&mut out).and_then(|_| out.flush()).map_err(io);
+    }
     if let Some(input) = protect
         && let (Ok(a), Ok(b)) = (std::fs::canonicalize(input), std::fs::canonicalize(path))
         && a == b
     {
         return Err(ExportError::WouldOverwriteInput(path.display().to_string()));
     }
-    let dir = path
+    if is_special(path) {
+        let result = (|| {
+            let file = std::fs::OpenOptions::new().append(true).open(path)?;
+            let mut w = std::io::BufWriter::new(file);
+            fill(&mut w)?;
+            w.flush()
+        })();
+        return result.map_err(io);
+    }
+    // A link to a regular file: replace its target, keep the link.
+    let target = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => std::fs::canonicalize(path).map_err(io)?,
+        _ => path.to_path_buf(),
+    };
+    let dir = target
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    let name = path
+    let name = target
         .file_name()
         .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
     let tmp: PathBuf = dir.join(format!(".{name}.{}.tmp", std::process::id()));
@@ -55,12 +92,70 @@ pub fn write_atomically(
         fill(&mut w)?;
         w.flush()?;
         w.into_inner().map_err(|e| e.into_error())?.sync_all()?;
-        std::fs::rename(&tmp, path)
+        std::fs::rename(&tmp, &target)
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(io)
+}
+
+/// A file that is written in place, never replaced: anything under `/dev` or
+/// `/proc`, or an existing path (links followed) that is not a regular file.
+fn is_special(path: &Path) -> bool {
+    let absolute = std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf());
+    if absolute.starts_with("/dev") || absolute.starts_with("/proc") {
+        return true;
+    }
+    std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir())
+}
+
+/// The format of a path output, from its file name's extension.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathFormat {
+    /// `t_s,lat_deg,lon_deg,alt_m,...` (see [`write_path_csv`]).
+    Csv,
+    /// A GPX 1.1 track (see [`write_path_gpx`]).
+    Gpx,
+}
+
+impl PathFormat {
+    pub const CHOICES: &str = ".csv (or - for standard output), .gpx";
+
+    /// The format `path` asks for: `-` and special files get CSV, `.csv` and
+    /// `.gpx` their own; anything else is an error naming the choices, since
+    /// CSV written into `path.kml` is a file no tool opens.
+    pub fn of(path: &Path) -> Result<Self, ExportError> {
+        if path.as_os_str() == "-" || is_special(path) {
+            return Ok(Self::Csv);
+        }
+        match extension(path).as_deref() {
+            Some("csv") => Ok(Self::Csv),
+            Some("gpx") => Ok(Self::Gpx),
+            _ => Err(ExportError::UnknownFormat {
+                path: path.display().to_string(),
+                what: "path",
+                choices: Self::CHOICES,
+            }),
+        }
+    }
+}
+
+/// A report output (JSON) must be named `.json`, `-` or a special file.
+pub fn check_report_name(path: &Path) -> Result<(), ExportError> {
+    if path.as_os_str() == "-" || is_special(path) || extension(path).as_deref() == Some("json") {
+        return Ok(());
+    }
+    Err(ExportError::UnknownFormat {
+        path: path.display().to_string(),
+        what: "report",
+        choices: ".json (or - for standard output)",
+    })
+}
+
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
 }
 
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
@@ -222,6 +317,8 @@ pub struct FitReport {
     pub parameters: BTreeMap<String, Vec<ParamValue>>,
     pub warnings: Vec<String>,
     pub elapsed_s: f64,
+    /// The path against a reference track, when one was given (`null` otherwise).
+    pub reference: Option<crate::diagnosis::ReferenceComparison>,
 }
 
 impl FitReport {
@@ -280,6 +377,7 @@ impl FitReport {
             parameters,
             warnings: sig.warnings.clone(),
             elapsed_s,
+            reference: None,
         }
     }
 
@@ -319,5 +417,49 @@ mod tests {
             first.contains(&format!("lat=\"{:.9}\"", g.lat_deg)),
             "{first}"
         );
+    }
+
+    #[test]
+    fn special_files_are_written_in_place_and_links_are_kept() {
+        use std::os::unix::fs::FileTypeExt;
+        write_atomically(Path::new("/dev/null"), None, |w| w.write_all(b"x")).unwrap();
+        let m = std::fs::metadata("/dev/null").unwrap();
+        assert!(m.file_type().is_char_device(), "/dev/null was replaced");
+
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("real.csv");
+        std::fs::write(&target, "old").unwrap();
+        let link = dir.path().join("link.csv");
+        std::os::unix::fs::symlink(&target, &link).unwrap();
+        write_atomically(&link, None, |w| w.write_all(b"new")).unwrap();
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+        assert_eq!(std::fs::read_to_string(&target).unwrap(), "new");
+    }
+
+    #[test]
+    fn the_format_follows_the_extension() {
+        assert_eq!(
+            PathFormat::of(Path::new("a/p.csv")).unwrap(),
+            PathFormat::Csv
+        );
+        assert_eq!(PathFormat::of(Path::new("p.GPX")).unwrap(), PathFormat::Gpx);
+        assert_eq!(PathFormat::of(Path::new("-")).unwrap(), PathFormat::Csv);
+        assert_eq!(
+            PathFormat::of(Path::new("/dev/stdout")).unwrap(),
+            PathFormat::Csv
+        );
+        let e = PathFormat::of(Path::new("p.kml")).unwrap_err().to_string();
+        assert!(e.contains("p.kml") && e.contains(".gpx"), "{e}");
+        assert!(check_report_name(Path::new("r.json")).is_ok());
+        assert!(check_report_name(Path::new("-")).is_ok());
+        let e = check_report_name(Path::new("r.txt"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("r.txt") && e.contains(".json"), "{e}");
     }
 }

@@ -25,6 +25,52 @@ pub fn median_of_finite(values: &[f64]) -> f64 {
     median(&mut finite)
 }
 
+/// A track's own scatter (m): the median distance of each point `en[i]` at
+/// `t[i]` from a quadratic in time fitted to its neighbours within 4 s
+/// (itself left out), `x(t) = a + b (t - t_i) + c (t - t_i)^2` per axis.
+/// It needs no model: a model that cannot follow the fixes is measured
+/// against something it cannot bend, and a check of the odometer against the
+/// GPS track knows how much of the track's length is noise. `None` with
+/// fewer than 5 points that have 4 neighbours on both sides.
+pub fn track_scatter_m(t: &[f64], en: &[[f64; 2]]) -> Option<f64> {
+    const HALF_WINDOW_S: f64 = 4.0;
+    let mut distances = Vec::new();
+    let mut lo = 0usize;
+    for i in 0..t.len() {
+        while t[lo] < t[i] - HALF_WINDOW_S {
+            lo += 1;
+        }
+        let mut a = nalgebra::Matrix3::<f64>::zeros();
+        let mut b = [nalgebra::Vector3::<f64>::zeros(); 2];
+        let (mut n, mut before, mut after) = (0, false, false);
+        for k in lo..t.len() {
+            if t[k] > t[i] + HALF_WINDOW_S {
+                break;
+            }
+            if k == i {
+                continue;
+            }
+            let dt = t[k] - t[i];
+            before |= dt < 0.0;
+            after |= dt > 0.0;
+            let h = nalgebra::Vector3::new(1.0, dt, dt * dt);
+            a += h * h.transpose();
+            for (axis, rhs) in b.iter_mut().enumerate() {
+                *rhs += h * en[k][axis];
+            }
+            n += 1;
+        }
+        if n < 4 || !before || !after {
+            continue;
+        }
+        let Some(inv) = a.try_inverse() else { continue };
+        let east = (inv * b[0])[0] - en[i][0];
+        let north = (inv * b[1])[0] - en[i][1];
+        distances.push(east.hypot(north));
+    }
+    (distances.len() >= 5).then(|| median(&mut distances))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -431,3 +431,100 @@ fn file_examples_opens_a_ride_with_something_to_find() {
         "the example loads"
     );
 }
+
+#[test]
+fn each_ride_starts_from_the_default_model_as_the_command_line_does() {
+    // As after a restart whose last ride had gps_lag added.
+    let mut settings = manual_settings();
+    settings.fit.model.effects = vec!["paper".into(), "gps_lag".into()];
+    let app = GyropathApp::new(settings, sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    let default = gyropath::model::ModelSpec::default().effects;
+    assert_eq!(h.state().settings.fit.model.effects, default);
+    h.get_by_label_contains("the model starts again from the paper's");
+
+    // Add an effect on this ride, then open another: it starts from the default again.
+    h.state_mut()
+        .apply(gyropath::app::Command::AddEffect("gps_lag".into()));
+    assert!(
+        h.state()
+            .settings
+            .fit
+            .model
+            .effects
+            .iter()
+            .any(|e| e == "gps_lag")
+    );
+    let ride = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/hidden-gyro-scale.csv");
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::file(ride),
+    ));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains("hidden-gyro-scale"))));
+    assert_eq!(h.state().settings.fit.model.effects, default);
+    assert!(
+        step_until(&mut h, Duration::from_secs(30), |a| a
+            .snapshot
+            .as_ref()
+            .is_some_and(|s| !s.effects.iter().any(|e| e == "gps_lag"))),
+        "the worker's model still has gps_lag"
+    );
+}
+
+#[test]
+fn a_reference_track_is_drawn_and_the_history_says_how_far_each_model_is_from_it() {
+    let drive = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/comma2k19-example1");
+    let app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::file(drive.join("ride.csv")),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| !a.history.is_empty()),
+        "the fit did not finish: {:?}",
+        h.state().error
+    );
+    h.state_mut().apply(gyropath::app::Command::OpenReference(
+        drive.join("truth.csv"),
+    ));
+    assert!(
+        step_until(&mut h, Duration::from_secs(30), |a| a
+            .history
+            .last()
+            .is_some_and(|r| r.reference_rms_m.is_some())),
+        "no error to the reference: {:?}",
+        h.state().error
+    );
+    let app = h.state();
+    let r = app.reference.as_ref().expect("reference view");
+    assert!((r.covered_s - 60.0).abs() < 1.0, "{}", r.covered_s);
+    let to_ref = app.history.last().unwrap().reference_rms_m.unwrap();
+    let snap = app.snapshot.as_ref().unwrap().reference.as_ref().unwrap();
+    assert_eq!(to_ref, snap.horizontal.rms_m);
+    // comma's path is about a metre from its reference; its fixes 1.5 m.
+    assert!((0.5..1.5).contains(&to_ref), "{to_ref} m");
+    assert!(!snap.series.is_empty());
+    // The history's column and the chart's legend.
+    assert!(h.query_all_by_label("to reference").count() >= 2);
+    assert!(
+        h.query_all_by_label("reference track").count() >= 1,
+        "the map's legend"
+    );
+
+    // A reference of another drive is refused with its reason, and the ride stays.
+    let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz/truth.csv");
+    h.state_mut()
+        .apply(gyropath::app::Command::OpenReference(berlin));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .error
+        .as_ref()
+        .is_some_and(|e| e.contains("not of this ride"))));
+    assert!(h.state().ride.is_some());
+}

@@ -478,3 +478,183 @@ fn diagnose_on_an_unphysical_fit_says_so_and_marks_nothing_significant() {
             .all(|c| c["significant"] == false)
     );
 }
+
+/// A short simulated ride at `path`.
+fn simulated(path: &Path, seed: &str, hidden: &str) {
+    let out = gyropath(&[
+        "simulate",
+        "--seed",
+        seed,
+        "--duration",
+        "180",
+        "--hidden",
+        hidden,
+        "--out",
+        s(path),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn listed_effects_add_to_the_papers_model_and_a_path_that_misses_the_fixes_is_a_failure() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "31", "gps_lag");
+    let report = dir.path().join("r.json");
+    let out = gyropath(&[
+        "fit",
+        s(&ride),
+        "--effects",
+        "gps_lag",
+        "--quiet",
+        "--report",
+        s(&report),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let model: Vec<&str> = r["model"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_str().unwrap())
+        .collect();
+    for id in ["initial_position", "gyro_bias_segments", "gps_lag"] {
+        assert!(model.contains(&id), "{model:?}");
+    }
+    assert!(r["stats"]["rms_horizontal_m"].as_f64().unwrap() < 10.0);
+
+    // The lag alone, the paper's model taken out: no path parameters, and
+    // the path cannot follow the fixes. That is a failure, not a result.
+    let path = dir.path().join("p.csv");
+    let out = gyropath(&[
+        "fit",
+        s(&ride),
+        "--effects=-paper,gps_lag",
+        "--quiet",
+        "--out",
+        s(&path),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("path's distance from the GPS fixes") && err.contains("scatter"),
+        "{err}"
+    );
+    assert!(!path.exists(), "a failed fit wrote its path");
+}
+
+#[test]
+fn a_batchs_outputs_never_collide_and_without_out_dir_it_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    for (folder, seed) in [("comma", "41"), ("berlin", "42")] {
+        std::fs::create_dir(dir.path().join(folder)).unwrap();
+        simulated(&dir.path().join(folder).join("ride.csv"), seed, "");
+    }
+    let a = dir.path().join("comma/ride.csv");
+    let b = dir.path().join("berlin/ride.csv");
+    let out_dir = dir.path().join("out");
+    let out = gyropath(&["fit", s(&a), s(&b), "--out-dir", s(&out_dir), "--quiet"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for stem in ["comma-ride", "berlin-ride"] {
+        let report = out_dir.join(format!("{stem}-report.json"));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let folder = stem.trim_end_matches("-ride");
+        assert!(
+            r["source"].as_str().unwrap().contains(folder),
+            "{stem}: {}",
+            r["source"]
+        );
+        assert!(out_dir.join(format!("{stem}-path.csv")).exists());
+    }
+    // The same ride twice: refused, naming it.
+    let out = gyropath(&["fit", s(&a), s(&a), "--out-dir", s(&out_dir)]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("give each ride once"));
+
+    // A folder without --out-dir: the table, and no files in the working directory.
+    let work = dir.path().join("work");
+    std::fs::create_dir(&work).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .args(["fit", s(&dir.path().join("comma")), "--quiet"])
+        .current_dir(&work)
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{table}");
+    assert!(table.contains("no files written"), "{table}");
+    assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0);
+}
+
+#[test]
+fn dash_is_standard_output_the_format_follows_the_extension_and_devices_stay_devices() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "51", "");
+    let run = |args: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_gyropath"))
+            .args(args)
+            .current_dir(dir.path())
+            .output()
+            .unwrap()
+    };
+    // The report on standard output (JSON alone there), the summary on standard error.
+    let out = run(&["fit", "ride.csv", "--report", "-"]);
+    assert!(out.status.success());
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+    assert!(r["stats"]["rms_horizontal_m"].as_f64().is_some());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rms       horizontal"));
+    assert!(!dir.path().join("-").exists(), "a file named - was written");
+
+    // .gpx is GPX; an unknown extension fails before the fit, naming the choices.
+    let out = run(&["fit", "ride.csv", "--quiet", "--out", "p.gpx"]);
+    assert!(out.status.success());
+    let gpx = std::fs::read_to_string(dir.path().join("p.gpx")).unwrap();
+    assert!(
+        gpx.starts_with("<?xml") && gpx.contains("<trkpt"),
+        "{gpx:.200}"
+    );
+    let out = run(&["fit", "ride.csv", "--out", "p.kml"]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(err.contains("p.kml") && err.contains(".gpx"), "{err}");
+    assert!(!err.contains("step 1"), "it fitted before refusing: {err}");
+    let out = run(&["diagnose", "ride.csv", "--json", "d.txt"]);
+    assert!(String::from_utf8_lossy(&out.stderr).contains(".json"));
+
+    // check --json /dev/stdout: the JSON arrives on standard output and
+    // /dev/stdout is still a link.
+    let out = run(&["check", "ride.csv", "--json", "/dev/stdout"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let json_start = text.find('{').expect("JSON on stdout");
+    let _: serde_json::Value = serde_json::from_str(&text[json_start..]).expect("valid JSON");
+    assert!(
+        std::fs::symlink_metadata("/dev/stdout")
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    let out = run(&["fit", "ride.csv", "--quiet", "--out", "/dev/null"]);
+    assert!(out.status.success());
+    use std::os::unix::fs::FileTypeExt;
+    assert!(
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+}

@@ -12,14 +12,20 @@ impl GyropathApp {
             );
             return;
         }
-        if self.history.iter().any(|r| r.held_out.is_some()) {
+        if self
+            .history
+            .iter()
+            .any(|r| r.held_out.is_some() || r.reference_rms_m.is_some())
+        {
             plots::history_ui(ui, &self.history, 110.0);
         }
         egui::ScrollArea::vertical()
             .id_salt("history-scroll")
             .show(ui, |ui| {
+                let with_reference = self.reference.is_some()
+                    || self.history.iter().any(|r| r.reference_rms_m.is_some());
                 egui::Grid::new("history")
-                    .num_columns(6)
+                    .num_columns(6 + usize::from(with_reference))
                     .striped(true)
                     .show(ui, |ui| {
                         for h in [
@@ -31,6 +37,11 @@ impl GyropathApp {
                             "held-out RMS",
                         ] {
                             ui.strong(h);
+                        }
+                        if with_reference {
+                            ui.strong("to reference").on_hover_text(
+                                "Horizontal RMS distance of the fitted path from the reference track, over the part of the ride it covers: which model is truly better",
+                            );
                         }
                         ui.end_row();
                         for row in &self.history {
@@ -48,6 +59,12 @@ impl GyropathApp {
                                     )),
                                 None => ui.label("validating..."),
                             };
+                            if with_reference {
+                                ui.label(
+                                    row.reference_rms_m
+                                        .map_or("-".into(), |r| format!("{r:.3} m")),
+                                );
+                            }
                             ui.end_row();
                         }
                     });

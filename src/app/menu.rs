@@ -7,7 +7,14 @@ impl GyropathApp {
     pub(super) fn dropped_files(&mut self, ui: &egui::Ui, commands: &mut Vec<Command>) {
         let dropped = ui.ctx().input(|i| i.raw.dropped_files.clone());
         if let Some(f) = dropped.into_iter().next() {
-            commands.push(Command::Open(RideSource::file(f.path().to_path_buf())));
+            let path = f.path().to_path_buf();
+            // A CSV with times and positions but no gyro is a reference track
+            // of the ride already open, not a ride.
+            if self.ride.is_some() && is_reference_track(&path) {
+                commands.push(Command::OpenReference(path));
+            } else {
+                commands.push(Command::Open(RideSource::file(path)));
+            }
         }
     }
 
@@ -22,6 +29,18 @@ impl GyropathApp {
                 }
                 if ui.button("Open the sample ride").clicked() {
                     commands.push(Command::Open(sample_ride()));
+                }
+                if ui
+                    .add_enabled(
+                        self.ride.is_some(),
+                        egui::Button::new("Open reference track..."),
+                    )
+                    .on_hover_text(
+                        "A better track of this drive (RTK, an INS): t_s,lat_deg,lon_deg[,alt_m] CSV on the ride's clock; the fit is measured against it",
+                    )
+                    .clicked()
+                {
+                    commands.push(Command::PickReference);
                 }
                 ui.menu_button("Examples", |ui| examples::examples_menu_ui(ui, commands));
                 ui.menu_button("Recent", |ui| {
@@ -82,4 +101,22 @@ impl GyropathApp {
             });
         }
     }
+}
+
+/// Whether `path` is a reference track: a CSV whose header (after `#`
+/// comments) names `t_s`, `lat_deg` and `lon_deg` but no gyro column.
+fn is_reference_track(path: &std::path::Path) -> bool {
+    use std::io::BufRead;
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let Some(Ok(header)) = std::io::BufReader::new(file)
+        .lines()
+        .find(|l| l.as_ref().map_or(true, |l| !l.starts_with('#')))
+    else {
+        return false;
+    };
+    let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+    let has = |c: &str| columns.contains(&c);
+    has("t_s") && has("lat_deg") && has("lon_deg") && !columns.iter().any(|c| c.ends_with("_dps"))
 }

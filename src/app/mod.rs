@@ -93,6 +93,10 @@ pub enum Command {
     Diagnose,
     /// Switch an effect on and refit.
     AddEffect(String),
+    /// Pick a reference track of the loaded ride with a file dialog.
+    PickReference,
+    /// Measure the fit against this reference track.
+    OpenReference(PathBuf),
 }
 
 /// One row of the model history: a finished fit of one model.
@@ -107,11 +111,14 @@ pub struct HistoryRow {
     /// it is (its own noise settings).
     pub held_out: Option<HeldOutRms>,
     pub iterations: usize,
+    /// Horizontal RMS distance from the reference track (m), when one is loaded.
+    pub reference_rms_m: Option<f64>,
 }
 
 /// Result of a file dialog, which runs on its own thread.
 enum Picked {
     Ride(PathBuf),
+    Reference(PathBuf),
     Export(ExportKind, PathBuf),
 }
 
@@ -126,6 +133,8 @@ pub struct GyropathApp {
     pub status: Option<String>,
     pub history: Vec<HistoryRow>,
     pub diagnosis: Option<crate::diagnosis::Diagnosis>,
+    /// The loaded ride's reference track, when one is open.
+    pub reference: Option<worker::ReferenceView>,
     /// Progress of a running diagnosis.
     pub diagnosing: Option<String>,
     hover_t: Option<f64>,
@@ -203,6 +212,7 @@ impl GyropathApp {
             status: None,
             history: Vec::new(),
             diagnosis: None,
+            reference: None,
             diagnosing: None,
             hover_t: None,
             picked_tx,
@@ -231,6 +241,8 @@ impl GyropathApp {
                     self.snapshot = None;
                     self.history.clear();
                     self.diagnosis = None;
+                    // A reference belongs to the ride it was opened for.
+                    self.reference = None;
                     if std::mem::take(&mut self.run_on_load) {
                         self.worker.send(Request::Run);
                     }
@@ -253,6 +265,16 @@ impl GyropathApp {
                 }
                 Update::Exported(p) => self.status = Some(format!("wrote {p}")),
                 Update::DiagnosisProgress(p) => self.diagnosing = Some(p),
+                Update::ReferenceLoaded(r) => {
+                    self.status = Some(format!(
+                        "reference {}: covers {:.0} s of the ride",
+                        r.name, r.covered_s
+                    ));
+                    self.reference = Some(*r);
+                    // The worker follows with a snapshot of the current fit
+                    // measured against it, which fills the last history row;
+                    // earlier models get it when they are fitted again.
+                }
                 // The diagnosis's own held-out error is of a refit under the
                 // noise as set: it stays in the diagnosis panel, and the
                 // history keeps one kind of number, its own validation's.
@@ -280,6 +302,7 @@ impl GyropathApp {
         while let Ok(p) = self.picked_rx.try_recv() {
             match p {
                 Picked::Ride(path) => self.apply(Command::Open(RideSource::file(path))),
+                Picked::Reference(path) => self.apply(Command::OpenReference(path)),
                 Picked::Export(kind, path) => self.worker.send(Request::Export(kind, path)),
             }
         }
@@ -297,18 +320,35 @@ impl GyropathApp {
             fit_rms_m: s.stats.rms_horizontal_m,
             held_out: None,
             iterations: s.history.len(),
+            reference_rms_m: s.reference.as_ref().map(|c| c.horizontal.rms_m),
         };
         let same = self.history.last().is_some_and(|r| {
             r.model == row.model && r.params == row.params && r.iterations == row.iterations
         });
         if !same {
             self.history.push(row);
+        } else if let (Some(last), Some(r)) = (self.history.last_mut(), row.reference_rms_m) {
+            // The same fit, now measured against a reference opened after it.
+            last.reference_rms_m = Some(r);
         }
     }
 
     pub fn apply(&mut self, command: Command) {
         match command {
             Command::Open(source) => {
+                // Each ride starts from the default model, as `gyropath fit`
+                // does on the same file: effects added on one ride say
+                // nothing about the next (nor about the last run's ride).
+                let default = crate::model::ModelSpec::default().effects;
+                if self.settings.fit.model.effects != default {
+                    self.status = Some(format!(
+                        "new ride: the model starts again from the paper's (the last ride had {})",
+                        self.settings.fit.model.effects.join(", ")
+                    ));
+                    self.settings.fit.model.effects = default;
+                    self.worker
+                        .send(Request::Settings(self.settings.fit.clone()));
+                }
                 self.run_on_load = self.settings.auto_run;
                 self.worker.send(Request::Load(source));
             }
@@ -352,6 +392,18 @@ impl GyropathApp {
                     }
                 });
             }
+            Command::PickReference => {
+                let tx = self.picked_tx.clone();
+                spawn_dialog(move || {
+                    if let Some(p) = rfd::FileDialog::new()
+                        .add_filter("reference track (t_s,lat_deg,lon_deg[,alt_m])", &["csv"])
+                        .pick_file()
+                    {
+                        let _ = tx.send(Picked::Reference(p));
+                    }
+                });
+            }
+            Command::OpenReference(path) => self.worker.send(Request::LoadReference(path)),
             Command::Run => self.worker.send(Request::Run),
             Command::Pause => self.worker.send(Request::Pause),
             Command::Step => self.worker.send(Request::Step),

@@ -32,7 +32,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
                 (Role::Odom, "odometer", &topics.odom),
                 (Role::Fix, "GPS", &topics.fix),
             ] {
-                ui.label(label);
+                let name = ui.label(label).id;
                 let mut picked = chosen.clone();
                 egui::ComboBox::from_id_salt(label)
                     .selected_text(chosen.as_str())
@@ -44,7 +44,9 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
                                 format!("{} ({}, {} msgs)", t.name, t.type_name, t.messages),
                             );
                         }
-                    });
+                    })
+                    .response
+                    .labelled_by(name);
                 if picked != *chosen {
                     let mut choice = TopicChoice {
                         imu: Some(topics.imu.clone()),
@@ -63,7 +65,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         });
     }
     ui.horizontal(|ui| {
-        ui.label("mounting");
+        let name = ui.label("mounting").id;
         let applied = origin.mount.clone().unwrap_or_else(|| "as logged".into());
         let mut picked: Option<MountChoice> = None;
         egui::ComboBox::from_id_salt("mount")
@@ -82,13 +84,15 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
                         picked = Some(MountChoice::Auto);
                     }
                 }
-            });
+            })
+            .response
+            .labelled_by(name);
         if let Some(m) = picked.filter(|m| *m != options.mount) {
             commands.push(reload(path, options, |o| o.mount = m));
         }
     });
     ui.horizontal(|ui| {
-        ui.label("attitude");
+        let name = ui.label("attitude").id;
         let current = options.attitude.clone().unwrap_or_else(|| "auto".into());
         let mut picked = current.clone();
         egui::ComboBox::from_id_salt("attitude")
@@ -101,7 +105,9 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
                 ui.selectable_value(&mut picked, "auto".to_string(), "auto (from the data)");
                 ui.selectable_value(&mut picked, "3d".to_string(), "3D");
                 ui.selectable_value(&mut picked, "planar".to_string(), "planar (heading only)");
-            });
+            })
+            .response
+            .labelled_by(name);
         if picked != current {
             commands.push(reload(path, options, |o| {
                 o.attitude = (picked != "auto").then_some(picked);

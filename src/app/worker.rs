@@ -11,11 +11,13 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::time::{Duration, Instant};
 
+use crate::diagnosis::reference::{self, Matched};
 use crate::diagnosis::{
     Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
     fix_residuals, held_out_rms, segment_biases,
 };
 use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
+use crate::import::ReferenceTrack;
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
 use crate::model::{Model, PathAt};
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
@@ -70,7 +72,19 @@ pub enum Request {
     Export(ExportKind, PathBuf),
     /// Rank the effects the current model lacks (runs beside the fit).
     Diagnose,
+    /// Measure the fit against a reference track of the loaded ride.
+    LoadReference(PathBuf),
     Shutdown,
+}
+
+/// A reference track matched to the loaded ride, for the map.
+#[derive(Clone, Debug)]
+pub struct ReferenceView {
+    pub name: String,
+    /// Log time, east, north (m) at the covered rows, at most [`MAX_PATH_POINTS`].
+    pub points: Vec<[f64; 3]>,
+    /// Seconds of the ride it covers, of its duration.
+    pub covered_s: f64,
 }
 
 /// A freshly loaded ride: the measurements to draw under the fit.
@@ -142,6 +156,10 @@ pub struct Snapshot {
     /// How sure the finished fit is (computed once the fit is done: 40
     /// posterior sweeps of the ride are too many for every iteration).
     pub sigma: Option<SigmaView>,
+    /// The finished fit against the reference track, when one is loaded; its
+    /// `series` keeps the largest error of every stretch of the ride that one
+    /// of at most [`MAX_PATH_POINTS`] points stands for.
+    pub reference: Option<crate::diagnosis::ReferenceComparison>,
 }
 
 /// The finished fit's uncertainties, aligned with what the snapshot draws.
@@ -170,6 +188,8 @@ pub enum Update {
     Exported(String),
     DiagnosisProgress(String),
     Diagnosis(Box<Diagnosis>),
+    /// A reference track was read and matched to the ride.
+    ReferenceLoaded(Box<ReferenceView>),
     /// Held-out error of a finished fit, for the model history.
     HeldOut {
         model: String,
@@ -248,6 +268,8 @@ struct LoadedRide {
     source: RideSource,
     signals: Arc<Signals>,
     fit: Option<Reconstruction>,
+    /// A reference track of this ride, matched to its rows.
+    reference: Option<Arc<(ReferenceTrack, Matched)>>,
 }
 
 struct Worker {
@@ -353,6 +375,7 @@ impl Worker {
             Request::Settings(settings) => self.apply_settings(settings),
             Request::Export(kind, path) => self.export(kind, &path),
             Request::Diagnose => self.diagnose_in_background(),
+            Request::LoadReference(path) => self.load_reference(&path),
             Request::Shutdown => {}
         }
     }
@@ -383,9 +406,55 @@ impl Worker {
             source,
             signals,
             fit: None,
+            reference: None,
         });
         self.restart_fit();
         self.send(Update::Running(false));
+    }
+
+    /// Read a reference track, match it to the loaded ride and measure the fit against it.
+    fn load_reference(&mut self, path: &std::path::Path) {
+        let Some(ride) = self.ride.as_mut() else {
+            self.send(Update::Error(
+                "open a ride before its reference track".into(),
+            ));
+            return;
+        };
+        let loaded = import::read_reference(path)
+            .map_err(|e| e.to_string())
+            .and_then(|r| {
+                let m = reference::match_rows(&ride.signals, &r).map_err(|e| e.to_string())?;
+                Ok((r, m))
+            });
+        let (track, matched) = match loaded {
+            Ok(v) => v,
+            Err(e) => {
+                self.send(Update::Error(format!("reference not loaded: {e}")));
+                return;
+            }
+        };
+        let sig = &ride.signals;
+        let stride = matched.at_rows.len().div_ceil(MAX_PATH_POINTS).max(1);
+        let points = matched
+            .at_rows
+            .iter()
+            .step_by(stride)
+            .map(|(j, r)| [sig.t[*j], r.x, r.y])
+            .collect();
+        let covered_s = matched
+            .at_rows
+            .windows(2)
+            .filter(|w| w[1].0 == w[0].0 + 1)
+            .map(|w| sig.dt[w[1].0])
+            .sum();
+        let view = ReferenceView {
+            name: track.source.clone(),
+            points,
+            covered_s,
+        };
+        ride.reference = Some(Arc::new((track, matched)));
+        self.send(Update::ReferenceLoaded(Box::new(view)));
+        self.send_snapshot();
     }
 
     /// A new fit of the loaded ride from its start guess.
@@ -511,7 +580,13 @@ impl Worker {
             .as_ref()
             .filter(|_| done)
             .and_then(|c| c.u.as_ref());
-        self.send(Update::Snapshot(Box::new(snapshot(fit, u))));
+        let mut snap = snapshot(fit, u);
+        if done && let Some(r) = self.ride.as_ref().and_then(|r| r.reference.as_ref()) {
+            let mut c = reference::compare(fit.model(), fit.params(), &r.0, &r.1);
+            c.series = peaks(&c.series, MAX_PATH_POINTS);
+            snap.reference = Some(c);
+        }
+        self.send(Update::Snapshot(Box::new(snap)));
     }
 
     fn export(&self, kind: ExportKind, path: &std::path::Path) {
@@ -576,6 +651,16 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         attitude: sig.attitude.clone(),
         frame: sig.frame.clone(),
     }
+}
+
+/// `(t, value)` pairs thinned to at most `n`: each kept point is the largest
+/// value of the stretch it stands for, so no error peak is lost to drawing.
+fn peaks(series: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
+    let stride = series.len().div_ceil(n).max(1);
+    series
+        .chunks(stride)
+        .filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)))
+        .collect()
 }
 
 /// The rows of the path decimated to at most [`MAX_PATH_POINTS`] (always keeping the last row).
@@ -664,6 +749,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
             segments: segment_sigmas(model, u, segments_len),
             params: param_sigmas,
         }),
+        reference: None,
     }
 }
 

@@ -43,8 +43,70 @@ impl std::fmt::Display for Violation {
     }
 }
 
-/// The limits a fitted model breaks (empty: a physical result).
+/// The limits a fitted model breaks (empty: a physical result): its
+/// parameters' ([`parameters`]) and its path's distance from the fixes
+/// ([`path_far_from_fixes`]).
 pub fn check(model: &Model, theta: &[f64]) -> Vec<Violation> {
+    let mut out = parameters(model, theta);
+    out.extend(path_far_from_fixes(model, theta));
+    out
+}
+
+/// A path whose distance from the fixes, at the upper quartile of the fixes
+/// (a quarter of them may be jumps of a city's reflections), is more than
+/// this many times the fixes' own scatter ([`fix_scatter_m`]) follows no GPS
+/// at all. The median is not enough: a path that follows the fixes for half
+/// of the ride and then leaves them by hundreds of metres has a small one.
+pub const MAX_PATH_TO_SCATTER: f64 = 5.0;
+/// ... and never less than this (m): on a smooth receiver's track the scatter
+/// is centimetres, while a model can honestly miss by a metre or two.
+pub const MIN_PATH_LIMIT_M: f64 = 10.0;
+
+/// The fixes' own scatter (m): see [`crate::statistics::track_scatter_m`].
+pub fn fix_scatter_m(fixes: &[crate::signals::Fix]) -> Option<f64> {
+    let t: Vec<f64> = fixes.iter().map(|f| f.t).collect();
+    let en: Vec<[f64; 2]> = fixes.iter().map(|f| f.en).collect();
+    crate::statistics::track_scatter_m(&t, &en)
+}
+
+/// The path is far worse than the fixes' own scatter: the model cannot follow
+/// the GPS (a path effect left out of the model, wrong axes or units), and its
+/// path is no result, however well the optimiser converged.
+pub fn path_far_from_fixes(model: &Model, theta: &[f64]) -> Option<Violation> {
+    let fixes = &model.signals.fixes;
+    let scatter = fix_scatter_m(fixes)?;
+    let rows: Vec<usize> = {
+        let mut r: Vec<usize> = fixes.iter().map(|f| f.row).collect();
+        r.dedup();
+        r
+    };
+    let path = model.sparse_path(theta, rows.clone());
+    let mut distances: Vec<f64> = fixes
+        .iter()
+        .filter_map(|f| {
+            let k = rows.binary_search(&f.row).ok()?;
+            let p = path.p_of(k);
+            Some((p.x - f.en[0]).hypot(p.y - f.en[1]))
+        })
+        .collect();
+    if distances.is_empty() {
+        return None;
+    }
+    distances.sort_by(f64::total_cmp);
+    let upper_quartile = distances[(3 * distances.len()) / 4];
+    let limit = (MAX_PATH_TO_SCATTER * scatter).max(MIN_PATH_LIMIT_M);
+    (upper_quartile > limit).then(|| Violation {
+        quantity: "path's distance from the GPS fixes".into(),
+        value: format!("{upper_quartile:.1} m or more from a quarter of the fixes"),
+        limit: format!(
+            "{limit:.1} m: {MAX_PATH_TO_SCATTER:.0} x the fixes' own scatter of {scatter:.1} m, at least {MIN_PATH_LIMIT_M:.0} m"
+        ),
+        cause: "the model cannot follow the GPS: an effect the path needs may be missing (effects are added to the paper's model; `-ID` takes one out), or the log's axes or units are wrong (see `gyropath check`)".into(),
+    })
+}
+
+/// The limits a fitted model's parameters break.
+pub fn parameters(model: &Model, theta: &[f64]) -> Vec<Violation> {
     let mut out = Vec::new();
     if let Some(e) = model.effect_index("odometer_gain") {
         let gain = theta[model.range(e).start];
@@ -120,7 +182,7 @@ mod tests {
         let sig = Arc::new(crate::testing::simulated_signals(3, 240.0, &[]));
         let model = Model::new(sig, ModelSpec::default()).unwrap();
         let mut theta = model.initial_params();
-        assert!(check(&model, &theta).is_empty());
+        assert!(parameters(&model, &theta).is_empty());
         let gain = model
             .range(model.effect_index("odometer_gain").unwrap())
             .start;
@@ -129,14 +191,14 @@ mod tests {
             .range(model.effect_index("initial_orientation").unwrap())
             .start;
         theta[orientation] = 152f64.to_radians();
-        let v = check(&model, &theta);
+        let v = parameters(&model, &theta);
         assert_eq!(v.len(), 2, "{v:?}");
         assert!(
             v[0].to_string().contains("odometer gain is -1.700") && v[0].cause.contains("sign")
         );
         assert!(v[1].cause.contains("upside down"), "{}", v[1]);
         theta[gain] = 3.55;
-        assert!(check(&model, &theta)[0].cause.contains("km/h"));
+        assert!(parameters(&model, &theta)[0].cause.contains("km/h"));
     }
 
     #[test]
@@ -164,5 +226,65 @@ mod tests {
         );
         assert!(absurd_estimate("gyro_scale", &[(&z, &e(3.0))]).is_none());
         assert!(absurd_estimate("gps_lag", &[(&z, &e(400.0))]).is_none());
+    }
+
+    #[test]
+    fn a_path_that_does_not_follow_the_fixes_is_no_result() {
+        let sig = Arc::new(crate::testing::simulated_signals(3, 240.0, &[]));
+        let scatter = fix_scatter_m(&sig.fixes).unwrap();
+        // The simulator's open-sky fixes scatter by a metre or two about the road.
+        assert!((0.3..4.0).contains(&scatter), "scatter {scatter} m");
+        let mut fit = crate::optimisation::Reconstruction::new(
+            sig,
+            crate::optimisation::FitSettings::default(),
+        )
+        .unwrap();
+        fit.finish();
+        let (model, mut theta) = fit.into_parts();
+        let start = model
+            .range(model.effect_index("initial_position").unwrap())
+            .start;
+        let near = path_far_from_fixes(&model, &theta);
+        assert!(near.is_none(), "{near:?}");
+        theta[start] += 500.0;
+        let v = path_far_from_fixes(&model, &theta).expect("500 m off");
+        assert!(
+            v.value.starts_with("50") || v.value.starts_with("49"),
+            "{v}"
+        );
+        assert!(
+            check(&model, &theta)
+                .iter()
+                .any(|c| c.quantity == v.quantity)
+        );
+    }
+
+    #[test]
+    fn the_fixes_scatter_is_their_noise_about_a_smooth_track() {
+        use crate::signals::Fix;
+        // A 10 m/s turn of radius 50 m with +-2 m uniform noise per axis (a
+        // fixed pseudo-random sequence): the local quadratic follows the turn.
+        let fixes: Vec<Fix> = (0..120)
+            .map(|k| {
+                let t = k as f64;
+                let phase = 0.2 * t;
+                let noise = |s: f64| 2.0 * ((s * 12.9898).sin() * 43758.5453).fract();
+                Fix {
+                    row: k,
+                    t,
+                    en: [
+                        50.0 * phase.cos() + noise(t),
+                        50.0 * phase.sin() + noise(t + 0.5),
+                    ],
+                    up: None,
+                    baro: None,
+                    hacc: None,
+                    vacc: None,
+                }
+            })
+            .collect();
+        let scatter = fix_scatter_m(&fixes).unwrap();
+        assert!((0.8..4.0).contains(&scatter), "scatter {scatter} m");
+        assert!(fix_scatter_m(&fixes[..4]).is_none());
     }
 }

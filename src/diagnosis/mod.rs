@@ -3,12 +3,17 @@
 
 pub mod limits;
 pub mod ranking;
+pub mod reference;
 pub mod residuals;
 pub mod structure;
 pub mod validation;
 pub mod whiteness;
 
-pub use ranking::{Candidate, Diagnosis, Estimate, diagnose, diagnose_fitted};
+pub use ranking::{
+    Against, Candidate, Diagnosis, Estimate, diagnose, diagnose_against, diagnose_fitted,
+    diagnose_fitted_against,
+};
+pub use reference::{ErrorStats, ReferenceComparison, ReferenceError};
 pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
 pub use validation::{Folds, HeldOut, HeldOutRms, held_out, held_out_rms};

@@ -48,6 +48,7 @@ use rayon::prelude::*;
 use super::validation::{ErrorLaw, Folds, HeldOut, comparable_fixes, fix_errors, held_out};
 use super::{ResidualRms, fix_residuals};
 use crate::effects::{self, Role};
+use crate::import::reference::ReferenceTrack;
 use crate::model::{Model, ModelSpec};
 use crate::optimisation::lm::damped_solve;
 use crate::optimisation::{FitError, FitSettings, Reconstruction};
@@ -100,6 +101,9 @@ pub struct Candidate {
     /// Why the candidate could not be fitted (then it ranks last).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Its fit on every fix against the reference track, when one was given:
+    /// what the held-out GPS error stands in for.
+    pub reference: Option<super::ReferenceComparison>,
 }
 
 /// What `gyropath diagnose` reports.
@@ -122,6 +126,9 @@ pub struct Diagnosis {
     pub not_physical: Vec<String>,
     /// Whether the GPS residuals are white (east, north), and over how long they are correlated.
     pub whiteness: Option<Vec<super::Whiteness>>,
+    /// The model's fit (under the noise as set, as the ranking's) against the
+    /// reference track, when one was given.
+    pub reference: Option<super::ReferenceComparison>,
 }
 
 /// Fit `settings.model` on the ride, then rank the missing effects.
@@ -131,11 +138,33 @@ pub fn diagnose(
     folds: &Folds,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, FitError> {
+    diagnose_against(signals, settings, folds, None, progress)
+}
+
+/// [`diagnose`], with the model and every candidate measured against a
+/// reference track (already matched to the ride's rows).
+pub fn diagnose_against(
+    signals: Arc<Signals>,
+    settings: &FitSettings,
+    folds: &Folds,
+    reference: Option<Against>,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Diagnosis, FitError> {
     progress("fitting the model");
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
-    diagnose_fitted(fit.model(), fit.params(), settings, folds, progress)
+    diagnose_fitted_against(
+        fit.model(),
+        fit.params(),
+        settings,
+        folds,
+        reference,
+        progress,
+    )
 }
+
+/// A reference track and its rows matched to the ride.
+pub type Against<'a> = (&'a ReferenceTrack, &'a super::reference::Matched);
 
 /// Rank the missing effects of a model already fitted at `theta`.
 ///
@@ -150,6 +179,18 @@ pub fn diagnose_fitted(
     theta: &[f64],
     settings: &FitSettings,
     folds: &Folds,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Diagnosis, FitError> {
+    diagnose_fitted_against(model, theta, settings, folds, None, progress)
+}
+
+/// [`diagnose_fitted`], measured against a reference track as well.
+pub fn diagnose_fitted_against(
+    model: &Model,
+    theta: &[f64],
+    settings: &FitSettings,
+    folds: &Folds,
+    reference: Option<Against>,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, FitError> {
     let settings = &FitSettings {
@@ -207,6 +248,7 @@ pub fn diagnose_fitted(
                 &use_fix,
                 base_rms.rms_m,
                 scale,
+                reference,
             );
             let n = done.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
             progress(&format!("tried {id} ({n} of {})", ids.len()));
@@ -241,6 +283,7 @@ pub fn diagnose_fitted(
         structure: super::structure(model, theta),
         not_physical,
         whiteness: super::whiteness(&residuals),
+        reference: reference.map(|(r, m)| super::reference::compare(model, theta, r, m)),
     })
 }
 
@@ -259,6 +302,7 @@ fn candidate(
     use_fix: &[bool],
     base_rms: f64,
     scale: f64,
+    reference: Option<Against>,
 ) -> Candidate {
     let failed = |e: String| Candidate {
         effect: id.to_string(),
@@ -270,6 +314,7 @@ fn candidate(
         estimate: BTreeMap::new(),
         explanation: String::new(),
         error: Some(e),
+        reference: None,
     };
     let mut spec: ModelSpec = base_model.spec.clone();
     spec.effects.push(id.to_string());
@@ -338,6 +383,8 @@ fn candidate(
         estimate,
         explanation,
         error: None,
+        reference: reference
+            .map(|(r, m)| super::reference::compare(fit.model(), fit.params(), r, m)),
     }
 }
 

@@ -369,21 +369,28 @@ pub const PAPER: [&str; 5] = [
 ];
 
 /// Expand a list of ids (`paper` stands for the paper's five) into effect ids
-/// in registry order, without duplicates. `baro_offset` is added whenever the
-/// log has a barometer.
+/// in registry order, without duplicates. `-id` takes an effect out again
+/// (`paper,-odometer_gain`: the paper's model with the odometer taken as
+/// calibrated). `baro_offset` is added whenever the log has a barometer.
 pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelError> {
     let mut ids: Vec<String> = Vec::new();
+    let mut removed: Vec<String> = Vec::new();
     for item in list {
         for part in item.split(',').map(str::trim).filter(|s| !s.is_empty()) {
-            if part == "paper" {
-                ids.extend(PAPER.iter().map(|s| s.to_string()));
-            } else if known(part) {
-                ids.push(part.to_string());
+            let (target, name) = match part.strip_prefix('-') {
+                Some(name) => (&mut removed, name.trim()),
+                None => (&mut ids, part),
+            };
+            if name == "paper" {
+                target.extend(PAPER.iter().map(|s| s.to_string()));
+            } else if known(name) {
+                target.push(name.to_string());
             } else {
-                return Err(ModelError::UnknownEffect(part.to_string()));
+                return Err(ModelError::UnknownEffect(name.to_string()));
             }
         }
     }
+    ids.retain(|id| !removed.contains(id));
     if signals.has_baro {
         ids.push("baro_offset".into());
     }
@@ -620,5 +627,20 @@ mod tests {
         assert_eq!(plus_minus(2.0, None, "m", 1), "2.0 m");
         // Unbounded parameters are always shown with their sigma.
         assert!(ParamInfo::new("start_east", "m", 1.0).determined(1e6));
+    }
+
+    #[test]
+    fn a_listed_effect_can_be_taken_out_again() {
+        let sig = crate::testing::simulated_signals(3, 60.0, &[]);
+        let list = |s: &str| vec![s.to_string()];
+        let ids = expand(&list("paper,gps_lag,-odometer_gain"), &sig).unwrap();
+        assert!(ids.contains(&"gps_lag".to_string()));
+        assert!(!ids.contains(&"odometer_gain".to_string()));
+        // The paper's five, less the gain, plus the lag and the barometer's offset.
+        assert_eq!(ids.len(), 6, "{ids:?}");
+        assert!(matches!(
+            expand(&list("paper,-warp_drive"), &sig),
+            Err(ModelError::UnknownEffect(e)) if e == "warp_drive"
+        ));
     }
 }

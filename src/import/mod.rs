@@ -13,6 +13,7 @@
 pub mod checks;
 pub mod mapped_csv;
 pub mod mount;
+pub mod reference;
 pub mod ride_csv;
 pub mod ros1;
 pub mod ros2;
@@ -26,6 +27,7 @@ use thiserror::Error;
 
 pub use checks::{CheckReport, Level, Verdict};
 pub use mount::Mount;
+pub use reference::{ReferenceTrack, read_reference};
 pub use ride_csv::{load_file, parse, parse_reader};
 pub use timeline::{TopicChoice, TopicInfo, Topics};
 

@@ -650,7 +650,7 @@ impl Reconstruction {
         self.settings.auto_noise.any()
             && !self.noise_done
             && self.has_segments()
-            && crate::diagnosis::limits::check(&self.model, &self.theta).is_empty()
+            && crate::diagnosis::limits::parameters(&self.model, &self.theta).is_empty()
     }
 
     /// The spec the fit runs: `spec` with the estimated noise in place of

@@ -71,6 +71,19 @@ pub fn history_ui(ui: &mut egui::Ui, history: &[HistoryRow], height: f32) {
                     .color(GPS.gamma_multiply(0.6))
                     .width(1.0),
             );
+            let reference: Vec<[f64; 2]> = history
+                .iter()
+                .enumerate()
+                .filter_map(|(i, r)| r.reference_rms_m.map(|e| [(i + 1) as f64, e]))
+                .collect();
+            if !reference.is_empty() {
+                plot.points(
+                    Points::new("to reference", reference)
+                        .color(super::REFERENCE)
+                        .radius(4.0)
+                        .shape(MarkerShape::Diamond),
+                );
+            }
         });
 }
 
@@ -91,6 +104,7 @@ mod tests {
                 jumps_left_out: 0,
             }),
             iterations: 9,
+            reference_rms_m: None,
         };
         let (heldout, fit) =
             history_series(&[row(Some(3.0), 2.0), row(None, 1.5), row(Some(2.0), 1.6)]);

@@ -8,7 +8,7 @@ use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, Points};
 use super::axes::{nearest, nice_grid, nice_grid_y, nice_step, runs, thin_to_pixels, tick_label};
 use super::{GPS, OUTAGE, PATH, RESIDUAL_BINS, SCALE, SIGMA};
 use crate::app::map_tiles::{MapBackground, attribution_ui};
-use crate::app::worker::{RideView, SigmaView, Snapshot};
+use crate::app::worker::{ReferenceView, RideView, SigmaView, Snapshot};
 
 /// GPS fixes and reconstructed path in local metres, equal aspect.
 pub fn map_ui(
@@ -18,6 +18,7 @@ pub fn map_ui(
     colour_by_residual: bool,
     hover_t: Option<f64>,
     mut background: Option<&mut MapBackground>,
+    reference: Option<&ReferenceView>,
 ) {
     let shown = Plot::new("map")
         .data_aspect(1.0)
@@ -32,6 +33,17 @@ pub fn map_ui(
             if let Some(bg) = background.as_deref_mut() {
                 let layer = bg.layer(plot.ctx(), plot.transform(), &ride.frame);
                 plot.add(layer);
+            }
+            if let Some(r) = reference {
+                // Under the path: where the path should have been.
+                plot.line(
+                    Line::new(
+                        "reference track",
+                        r.points.iter().map(|p| [p[1], p[2]]).collect::<Vec<_>>(),
+                    )
+                    .color(super::REFERENCE)
+                    .width(3.0),
+                );
             }
             let fixes = thin_to_pixels(plot, ride.fixes.iter().map(|f| [f[1], f[2]]));
             plot.points(

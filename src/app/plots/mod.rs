@@ -23,6 +23,8 @@ const GPS: Color32 = Color32::from_rgb(120, 160, 255);
 const PATH: Color32 = Color32::from_rgb(255, 200, 60);
 const OUTAGE: Color32 = Color32::from_rgb(255, 110, 200);
 const SCALE: Color32 = Color32::from_gray(210);
+/// The reference track and the path's distance from it.
+const REFERENCE: Color32 = Color32::from_rgb(235, 235, 235);
 const SIGMA: Color32 = Color32::from_rgba_premultiplied(150, 150, 150, 140);
 const AXES: [Color32; 3] = [
     Color32::from_rgb(240, 90, 90),
@@ -60,6 +62,7 @@ impl super::GyropathApp {
                     self.map_background
                         .as_mut()
                         .filter(|_| self.settings.map_tiles),
+                    self.reference.as_ref(),
                 );
             });
             ui.vertical(|ui| {

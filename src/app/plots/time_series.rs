@@ -154,6 +154,18 @@ fn fix_series_ui(
             }
             start = end;
         }
+        // The path's distance from the reference track, where one is loaded
+        // (in metres, so not on the plot in sigmas).
+        if band.is_none()
+            && let Some(c) = &snap.reference
+        {
+            let pts: Vec<[f64; 2]> = c.series.iter().map(|&(t, e)| [t - t0, e]).collect();
+            plot.line(
+                Line::new("|path - reference| (m)", decimate(&pts, lo, hi, px))
+                    .color(super::REFERENCE)
+                    .width(1.5),
+            );
+        }
         if let Some(b) = band {
             for y in [-b, b] {
                 plot.hline(

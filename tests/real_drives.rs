@@ -1,0 +1,219 @@
+//! Every real drive in `../shared/real` that has a reference `truth.csv`,
+//! run as a user runs it: the default fit, then the workflow of the app's
+//! Diagnose and Add buttons (diagnose, add the top significant effect, refit,
+//! until nothing significant is left), each measured against the drive's
+//! reference. The table it prints is the README's "Real drives" table.
+//!
+//! The drives and their licences: `comma2k19-example1` (comma.ai, MIT) and
+//! `smartloc-berlin-potsdamer-platz` (TU Chemnitz, CC BY-SA 4.0; only the
+//! first 140 s of its reference are shared, the rest is kept back to check
+//! that nothing is tuned to it).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use gyropath::diagnosis::reference::{self, Matched, ReferenceComparison};
+use gyropath::diagnosis::{Folds, diagnose_fitted_against};
+use gyropath::import::reference::ReferenceTrack;
+use gyropath::import::{ImportOptions, read_reference};
+use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
+use gyropath::signals::{Fix, Signals};
+
+fn shared_real() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/real")
+}
+
+/// Drives with a ride log and a reference, by folder name.
+fn drives() -> Vec<PathBuf> {
+    let mut out: Vec<PathBuf> = std::fs::read_dir(shared_real())
+        .expect("../shared/real")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("ride.csv").is_file() && p.join("truth.csv").is_file())
+        .collect();
+    out.sort();
+    out
+}
+
+struct Drive {
+    signals: Arc<Signals>,
+    /// What `gyropath check` says of the log.
+    verdicts: Vec<gyropath::import::Verdict>,
+    reference: ReferenceTrack,
+    matched: Matched,
+}
+
+fn open(folder: &Path) -> Drive {
+    let imported =
+        gyropath::import::open(&folder.join("ride.csv"), &ImportOptions::default()).expect("ride");
+    let verdicts = imported.check.verdicts.clone();
+    let signals = Arc::new(imported.into_signals().expect("signals"));
+    let reference = read_reference(&folder.join("truth.csv")).expect("truth.csv");
+    let matched = reference::match_rows(&signals, &reference).expect("matched");
+    Drive {
+        signals,
+        verdicts,
+        reference,
+        matched,
+    }
+}
+
+fn fit(d: &Drive, settings: FitSettings) -> (Reconstruction, ReferenceComparison) {
+    let mut f = Reconstruction::new(d.signals.clone(), settings).expect("fit");
+    f.finish();
+    let c = reference::compare(f.model(), f.params(), &d.reference, &d.matched);
+    (f, c)
+}
+
+/// What the app's Diagnose and Add do, until nothing significant is left:
+/// the effects added, in order, and the last fit against the reference.
+fn workflow(d: &Drive) -> (Vec<String>, ReferenceComparison) {
+    let mut settings = FitSettings::default();
+    let (mut current, mut c) = fit(d, settings.clone());
+    let mut added = Vec::new();
+    for _ in 0..4 {
+        let diagnosis = diagnose_fitted_against(
+            current.model(),
+            current.params(),
+            &settings,
+            &Folds::default(),
+            Some((&d.reference, &d.matched)),
+            &|_: &str| {},
+        )
+        .expect("diagnose");
+        let Some(top) = diagnosis.ranking.first().filter(|c| c.significant) else {
+            break;
+        };
+        added.push(top.effect.clone());
+        settings.model.effects.push(top.effect.clone());
+        (current, c) = fit(d, settings.clone());
+    }
+    (added, c)
+}
+
+/// What the sensors allow: the paper's model with a constant bias (no
+/// segments) fitted to the reference itself, taken as 0.1 m fixes at the
+/// rows of the GPS fixes it covers.
+fn dead_reckoning_floor(d: &Drive) -> ReferenceComparison {
+    let mut s: Signals = (*d.signals).clone();
+    let at: std::collections::HashMap<usize, nalgebra::Vector3<f64>> =
+        d.matched.at_rows.iter().copied().collect();
+    s.fixes = s
+        .fixes
+        .iter()
+        .filter_map(|f| {
+            let r = at.get(&f.row)?;
+            Some(Fix {
+                en: [r.x, r.y],
+                up: None,
+                baro: None,
+                hacc: None,
+                vacc: None,
+                ..f.clone()
+            })
+        })
+        .collect();
+    let floor = Drive {
+        signals: Arc::new(s),
+        verdicts: Vec::new(),
+        reference: d.reference.clone(),
+        matched: Matched {
+            at_rows: d.matched.at_rows.clone(),
+        },
+    };
+    let mut settings = FitSettings {
+        auto_noise: AutoNoise::OFF,
+        ..FitSettings::default()
+    };
+    settings.model.effects = vec!["paper".into(), "-gyro_bias_segments".into()];
+    settings.model.sigma_horizontal_m = 0.1;
+    fit(&floor, settings).1
+}
+
+#[test]
+fn real_drives_against_their_references() {
+    let drives = drives();
+    assert!(
+        drives.len() >= 2,
+        "real drives with a reference: {drives:?}"
+    );
+    let mut table = vec![
+        "| drive | covered | GPS fixes | default | workflow (added) | dead-reckoning floor |"
+            .to_string(),
+        "| --- | --- | --- | --- | --- | --- |".to_string(),
+    ];
+    for folder in &drives {
+        let name = folder.file_name().unwrap().to_string_lossy().into_owned();
+        let d = open(folder);
+        let (default_fit, default) = fit(&d, FitSettings::default());
+        let (added, after) = workflow(&d);
+        let floor = dead_reckoning_floor(&d);
+        let fixes = default.fixes.expect("fixes covered by the reference");
+        table.push(format!(
+            "| {name} | {:.0} of {:.0} s | {:.2} m | {:.2} m | {:.2} m ({}) | {:.2} m |",
+            default.covered_s,
+            default.ride_s,
+            fixes.rms_m,
+            default.horizontal.rms_m,
+            after.horizontal.rms_m,
+            if added.is_empty() {
+                "nothing significant".to_string()
+            } else {
+                added.join(", ")
+            },
+            floor.horizontal.rms_m
+        ));
+        // Every drive: the default path beats the fixes it was fitted to, and
+        // the workflow never makes the path worse than the default by more
+        // than noise.
+        assert!(
+            default.horizontal.rms_m < fixes.rms_m,
+            "{name}: default {} m vs fixes {} m",
+            default.horizontal.rms_m,
+            fixes.rms_m
+        );
+        assert!(
+            after.horizontal.rms_m < 1.05 * default.horizontal.rms_m,
+            "{name}: workflow {} m vs default {} m",
+            after.horizontal.rms_m,
+            default.horizontal.rms_m
+        );
+        assert!(floor.horizontal.rms_m < default.horizontal.rms_m);
+        let odometer: Vec<String> = d
+            .verdicts
+            .iter()
+            .filter(|v| v.subject == "odometer")
+            .map(|v| format!("{}: {}", v.level.label(), v.message))
+            .collect();
+        match name.as_str() {
+            // The real-drives issue's comma target: after the workflow within 0.6 m.
+            "comma2k19-example1" => {
+                assert!(after.horizontal.rms_m < 0.6, "{name}: {after:?}");
+                assert_eq!(added.first().map(String::as_str), Some("gps_lag"));
+            }
+            // Berlin: city fixes 20 m off. Guards of today's result (the
+            // issue's targets, 0.35 and 0.25 x the fixes, are not met yet:
+            // see README), and no odometer warning from a noisy GPS track.
+            "smartloc-berlin-potsdamer-platz" => {
+                assert!(
+                    default.horizontal.rms_m < 0.5 * fixes.rms_m,
+                    "{name}: {default:?}"
+                );
+                // A noisy city track is longer than the road; that is no
+                // odometer fault (it read 0.728 m per GPS m before).
+                assert!(
+                    odometer.iter().all(|v| v.starts_with("ok")),
+                    "{name}: {odometer:?}"
+                );
+                let m = default_fit.model();
+                let bias = m.range(m.effect_index("gyro_bias").expect("gyro_bias"));
+                let fixed = m.fixed_mask();
+                assert!(
+                    fixed[bias.start] && fixed[bias.start + 1],
+                    "a yaw-rate sensor gets no roll or pitch bias"
+                );
+            }
+            _ => {}
+        }
+    }
+    eprintln!("{}", table.join("\n"));
+}
