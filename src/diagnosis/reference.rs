@@ -195,18 +195,7 @@ pub fn match_rows(
         return Err(no_overlap());
     }
     // A file of another drive: far from every fix it overlaps.
-    let mut d: Vec<f64> = Vec::new();
-    let mut next = 0usize;
-    for f in &signals.fixes {
-        while next < at_rows.len() && at_rows[next].0 < f.row {
-            next += 1;
-        }
-        if let Some((row, r)) = at_rows.get(next)
-            && *row == f.row
-        {
-            d.push((f.en[0] - r.x).hypot(f.en[1] - r.y));
-        }
-    }
+    let mut d = fix_distances(signals, &at_rows);
     if !d.is_empty() {
         let median = crate::statistics::median(&mut d);
         if median > MAX_FIX_DISTANCE_M {
@@ -217,6 +206,23 @@ pub fn match_rows(
         }
     }
     Ok(Matched { at_rows })
+}
+
+/// The horizontal distance of every fix on a covered row from the reference there.
+fn fix_distances(signals: &Signals, at_rows: &[(usize, Vector3<f64>)]) -> Vec<f64> {
+    let mut out = Vec::new();
+    let mut k = 0usize;
+    for f in &signals.fixes {
+        while k < at_rows.len() && at_rows[k].0 < f.row {
+            k += 1;
+        }
+        if let Some((row, r)) = at_rows.get(k)
+            && *row == f.row
+        {
+            out.push((f.en[0] - r.x).hypot(f.en[1] - r.y));
+        }
+    }
+    out
 }
 
 /// Compare the path of `model` at `theta` with the matched reference.
@@ -268,21 +274,7 @@ pub fn compare(
         }
     });
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
-    let fixes: Vec<f64> = {
-        let mut out = Vec::new();
-        let mut k = 0usize;
-        for f in &sig.fixes {
-            while k < n && matched.at_rows[k].0 < f.row {
-                k += 1;
-            }
-            if let Some((row, r)) = matched.at_rows.get(k)
-                && *row == f.row
-            {
-                out.push((f.en[0] - r.x).hypot(f.en[1] - r.y));
-            }
-        }
-        out
-    };
+    let fixes = fix_distances(sig, &matched.at_rows);
     ReferenceComparison {
         reference: reference.source.clone(),
         rows: horizontal.len(),
