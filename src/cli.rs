@@ -10,7 +10,8 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use gyropath::diagnosis::{Diagnosis, Folds, limits, reference};
 use gyropath::export::{
-    FitReport, PathFormat, check_report_name, write_atomically, write_path_csv, write_path_gpx,
+    FitReport, PathFormat, check_report_name, write_atomically, write_json, write_path_csv,
+    write_path_gpx,
 };
 use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
@@ -44,6 +45,11 @@ pub enum Command {
     /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder) or a mapped CSV to a ride-log CSV.
     Import(ImportArgs),
     /// Check a log's axes, units and datum against its own data, and recommend a mounting.
+    ///
+    /// Exits with status 1 when it reports a problem that reading the input
+    /// as its kind does by default leaves (a bag's axes are re-mounted by
+    /// default, a CSV's are not), and with --strict on a warning too.
+    /// Example: `gyropath check ride.csv --json check.json`.
     Check(CheckArgs),
 }
 
@@ -125,9 +131,12 @@ pub struct CheckArgs {
     pub source: PathBuf,
     #[command(flatten)]
     pub options: SourceArgs,
-    /// Write the verdicts here (JSON).
+    /// Write the verdicts here (JSON; - for standard output).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Exit with status 1 on warnings too, not only on problems.
+    #[arg(long)]
+    pub strict: bool,
 }
 
 #[derive(Clone, Copy, Debug, ValueEnum)]
@@ -533,11 +542,8 @@ fn on_stdout(path: &Path) -> bool {
 
 /// Write a JSON report to `out`.
 fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Result<()> {
-    write_atomically(out, Some(ride), |w| {
-        serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)?;
-        writeln!(w)
-    })
-    .context("the report could not be written")
+    write_atomically(out, Some(ride), |w| write_json(w, report))
+        .context("the report could not be written")
 }
 
 /// A fit beyond the physical limits is a failure, with its likely cause,
@@ -916,10 +922,7 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
         write_atomically(t, None, |w| w.write_all(ride.truth_csv.as_bytes()))?;
     }
     if let Some(t) = &args.truth_params {
-        write_atomically(t, None, |w| {
-            serde_json::to_writer_pretty(&mut *w, &ride.truth).map_err(std::io::Error::other)?;
-            writeln!(w)
-        })?;
+        write_atomically(t, None, |w| write_json(w, &ride.truth))?;
     }
     eprintln!(
         "wrote {} ({:.0} s, {:.0} m, hidden: {})",
@@ -1229,6 +1232,25 @@ pub fn check(args: &CheckArgs) -> Result<()> {
     }
     if report.worst() == Level::Problem && report.recommended.is_none() {
         anyhow::bail!("the log's axes or units contradict its data, and no mounting undoes it");
+    }
+    // What a fit of this input with its defaults would still meet.
+    let default_mount = match imported.kind.default_mount() {
+        MountChoice::Auto => report.recommended.as_ref(),
+        _ => None,
+    };
+    let remaining = report.after_mounting(default_mount);
+    let worst = remaining.iter().map(|v| v.level).max().unwrap_or(Level::Ok);
+    if worst == Level::Problem {
+        anyhow::bail!(
+            "the checks found a problem (above) that the input's default reading leaves{}",
+            report
+                .recommended
+                .as_ref()
+                .map_or(String::new(), |m| format!(": --mount \"{m}\" undoes it"))
+        );
+    }
+    if args.strict && worst == Level::Warning {
+        anyhow::bail!("the checks found a warning (above), and --strict was given");
     }
     Ok(())
 }

@@ -158,6 +158,34 @@ fn extension(path: &Path) -> Option<String> {
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
 }
 
+/// The version of the JSON outputs' shape: 2 since a settings' `limit` is
+/// `null` (not `"None"`) and a fit report has `reference`.
+pub const SCHEMA_VERSION: u32 = 2;
+
+/// A JSON output with what made it: every report, diagnosis and check that
+/// gyropath writes carries the tool's version and the schema's, so a
+/// script reading it can tell which fields to expect.
+#[derive(serde::Serialize)]
+pub struct Versioned<'a, T: serde::Serialize> {
+    pub tool: &'static str,
+    pub tool_version: &'static str,
+    pub schema_version: u32,
+    #[serde(flatten)]
+    pub content: &'a T,
+}
+
+/// Write `content` as pretty JSON with the tool's and the schema's versions.
+pub fn write_json(w: &mut dyn Write, content: &impl serde::Serialize) -> std::io::Result<()> {
+    let versioned = Versioned {
+        tool: "gyropath",
+        tool_version: env!("CARGO_PKG_VERSION"),
+        schema_version: SCHEMA_VERSION,
+        content,
+    };
+    serde_json::to_writer_pretty(&mut *w, &versioned).map_err(std::io::Error::other)?;
+    writeln!(w)
+}
+
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
 /// compass heading, and with `sigma` the path's 1-sigma east, north and up)
 /// for every row of the log.

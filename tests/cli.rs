@@ -672,3 +672,69 @@ fn the_bundled_city_example_is_a_result_not_a_failure() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+#[test]
+fn check_fails_on_a_problem_the_default_reading_leaves_and_json_says_what_made_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("mis.csv");
+    let out = gyropath(&[
+        "simulate",
+        "--seed",
+        "3",
+        "--duration",
+        "200",
+        "--gyro-axes",
+        "x=-z,y=-x,z=y",
+        "--out",
+        s(&ride),
+    ]);
+    assert!(out.status.success());
+    // A CSV is read as logged: its wrong axes are a problem, status 1, with the cure.
+    let out = gyropath(&["check", s(&ride)]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--mount \"") && err.contains("undoes it"),
+        "{err}"
+    );
+    // A bag's axes are re-mounted by default: the same finding is no failure.
+    let out = gyropath(&["check", &format!("{HUSKY}/test1.bag")]);
+    assert!(out.status.success());
+    // --strict fails on the Berlin drive's warnings (its 5 Hz yaw-rate
+    // sensor gives no vertical axis to check); without it, status 0.
+    let berlin = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/real/smartloc-berlin-potsdamer-platz/ride.csv"
+    );
+    assert!(gyropath(&["check", berlin]).status.success());
+    assert_eq!(
+        gyropath(&["check", berlin, "--strict"]).status.code(),
+        Some(1)
+    );
+
+    // Every JSON output carries the tool's and the schema's versions, and
+    // a setting with no limit says null, not "None".
+    let fit = gyropath(&[
+        "fit",
+        s(&ride),
+        "--mount",
+        "auto",
+        "--quiet",
+        "--report",
+        "-",
+    ]);
+    assert!(fit.status.success());
+    let r: serde_json::Value = serde_json::from_slice(&fit.stdout).unwrap();
+    assert_eq!(r["tool"], "gyropath");
+    assert_eq!(r["tool_version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!(r["schema_version"], 2);
+    assert!(
+        r["noise"]["gps_sigma_m"]["limit"].is_null(),
+        "{}",
+        r["noise"]
+    );
+    assert!(!String::from_utf8_lossy(&fit.stdout).contains("\"None\""));
+    let check = gyropath(&["check", berlin, "--json", "-"]);
+    let c: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
+    assert_eq!(c["schema_version"], 2);
+}

@@ -16,7 +16,7 @@ use crate::diagnosis::{
     Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
     fix_residuals, held_out_rms, segment_biases,
 };
-use crate::export::{FitReport, write_atomically, write_path_csv, write_path_gpx};
+use crate::export::{FitReport, write_atomically, write_json, write_path_csv, write_path_gpx};
 use crate::import::ReferenceTrack;
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
 use crate::model::{Model, PathAt};
@@ -612,11 +612,7 @@ impl Worker {
             }
             ExportKind::ReportJson => {
                 let report = FitReport::new(fit, 0.0);
-                write_atomically(path, protect, |w| {
-                    serde_json::to_writer_pretty(&mut *w, &report)
-                        .map_err(std::io::Error::other)?;
-                    writeln!(w)
-                })
+                write_atomically(path, protect, |w| write_json(w, &report))
             }
         };
         match result {

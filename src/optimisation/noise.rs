@@ -102,12 +102,38 @@ pub struct Estimated {
 /// ride cannot tell how far beyond it the setting lies (a correlation time
 /// longer than the ride, a jitter too small to see), only that it is beyond
 /// `low` (`AtLeast`) or within `high` (`AtMost`), at 1 sigma.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Limit {
     #[default]
     None,
     AtLeast,
     AtMost,
+}
+
+/// In JSON: `null` (no limit; it was the string `"None"`, which no JSON
+/// reader takes for nothing), `"at_least"`, `"at_most"`.
+impl serde::Serialize for Limit {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self {
+            Limit::None => s.serialize_none(),
+            Limit::AtLeast => s.serialize_some("at_least"),
+            Limit::AtMost => s.serialize_some("at_most"),
+        }
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Limit {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text: Option<String> = serde::Deserialize::deserialize(d)?;
+        match text.as_deref() {
+            None | Some("None") => Ok(Limit::None),
+            Some("at_least" | "AtLeast") => Ok(Limit::AtLeast),
+            Some("at_most" | "AtMost") => Ok(Limit::AtMost),
+            Some(other) => Err(serde::de::Error::custom(format!(
+                "unknown limit '{other}' (null, at_least or at_most)"
+            ))),
+        }
+    }
 }
 
 impl Estimated {
@@ -1049,6 +1075,27 @@ const WEAK_CURVATURE: f64 = 2.0;
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_settings_limit_is_null_or_a_word_in_json() {
+        let e = |limit| Estimated {
+            limit,
+            ..Estimated::held(1.0)
+        };
+        let json = serde_json::to_string(&e(Limit::None)).unwrap();
+        assert!(json.contains("\"limit\":null"), "{json}");
+        let json = serde_json::to_string(&e(Limit::AtLeast)).unwrap();
+        assert!(json.contains("\"limit\":\"at_least\""), "{json}");
+        for (text, limit) in [
+            ("null", Limit::None),
+            ("\"None\"", Limit::None),
+            ("\"at_most\"", Limit::AtMost),
+        ] {
+            let back: Limit = serde_json::from_str(text).unwrap();
+            assert_eq!(back, limit);
+        }
+        assert!(serde_json::from_str::<Limit>("\"sideways\"").is_err());
+    }
+
     use super::*;
 
     /// `-2 ln L` of a correlated Gaussian in two log-settings: minimum at
