@@ -771,7 +771,7 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
                     r.gps_fixes,
                     r.stats.rms_horizontal_m,
                     vertical.map_or("-".into(), |v| format!("{v:.3} m")),
-                    value("gyro_bias", "bias_z"),
+                    r.bias_total[2].map_or(f64::NAN, |t| t.mean_dps),
                     value("odometer_gain", "gain"),
                     r.reference
                         .as_ref()
@@ -871,6 +871,11 @@ fn summary_text(r: &FitReport) -> String {
     if let Some(v) = r.stats.rms_baro_up_m {
         _ = writeln!(out, "          barometer {v:.3} m");
     }
+    for (axis, total) in ["x", "y", "z"].iter().zip(&r.bias_total) {
+        if let Some(t) = total {
+            _ = writeln!(out, "bias      total {axis} {}", t.describe());
+        }
+    }
     for (effect, values) in &r.parameters {
         if effect == "gyro_bias_segments" {
             let n = values.len() / 3;
@@ -881,7 +886,12 @@ fn summary_text(r: &FitReport) -> String {
             .iter()
             .map(|p| format!("{} {}", p.name, p.describe()))
             .collect();
-        _ = writeln!(out, "{effect}: {}", list.join(", "));
+        let part = if effect == "gyro_bias" && r.parameters.contains_key("gyro_bias_segments") {
+            " (constant part)"
+        } else {
+            ""
+        };
+        _ = writeln!(out, "{effect}{part}: {}", list.join(", "));
     }
     if let Some(c) = &r.reference {
         _ = writeln!(out, "reference {}: {}", c.reference, c.coverage());

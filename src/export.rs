@@ -347,6 +347,58 @@ pub struct FitReport {
     pub elapsed_s: f64,
     /// The path against a reference track, when one was given (`null` otherwise).
     pub reference: Option<crate::diagnosis::ReferenceComparison>,
+    /// The bias the sensor had: the constant plus each segment's, per
+    /// fitted axis (x, y, z; `null` for an axis held, as a yaw-rate sensor's
+    /// roll and pitch). `gyro_bias` alone is only its constant part.
+    pub bias_total: [Option<BiasTotal>; 3],
+}
+
+/// One axis of the total gyro bias over the ride (deg/s): its mean over
+/// time (each segment weighted by its length) and its range over segments.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct BiasTotal {
+    pub mean_dps: f64,
+    pub min_dps: f64,
+    pub max_dps: f64,
+    pub segments: usize,
+}
+
+impl BiasTotal {
+    /// Per axis, from the bias per segment (`diagnosis::segment_biases`);
+    /// `fitted[a]` says whether axis `a` is estimated at all.
+    pub fn of(segments: &[crate::diagnosis::SegmentBias], fitted: [bool; 3]) -> [Option<Self>; 3] {
+        [0, 1, 2].map(|a| {
+            let span: f64 = segments.iter().map(|s| s.t1 - s.t0).sum();
+            (fitted[a] && !segments.is_empty() && span > 0.0).then(|| Self {
+                mean_dps: segments
+                    .iter()
+                    .map(|s| s.bias_dps[a] * (s.t1 - s.t0))
+                    .sum::<f64>()
+                    / span,
+                min_dps: segments
+                    .iter()
+                    .map(|s| s.bias_dps[a])
+                    .fold(f64::INFINITY, f64::min),
+                max_dps: segments
+                    .iter()
+                    .map(|s| s.bias_dps[a])
+                    .fold(f64::NEG_INFINITY, f64::max),
+                segments: segments.len(),
+            })
+        })
+    }
+
+    /// "0.053 deg/s (0.041 to 0.089 over 57 segments)".
+    pub fn describe(&self) -> String {
+        if self.segments > 1 {
+            format!(
+                "{:.4} deg/s ({:.4} to {:.4} over {} segments)",
+                self.mean_dps, self.min_dps, self.max_dps, self.segments
+            )
+        } else {
+            format!("{:.4} deg/s", self.mean_dps)
+        }
+    }
 }
 
 impl FitReport {
@@ -366,6 +418,7 @@ impl FitReport {
         let sig = &model.signals;
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
         let fixed = model.fixed_mask();
+        let fixed_mask = fixed.clone();
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -406,6 +459,16 @@ impl FitReport {
             warnings: sig.warnings.clone(),
             elapsed_s,
             reference: None,
+            bias_total: {
+                let fitted = model.effect_index("gyro_bias").map_or([false; 3], |e| {
+                    let r = model.range(e);
+                    [0, 1, 2].map(|a| !fixed_mask[r.start + a])
+                });
+                BiasTotal::of(
+                    &crate::diagnosis::segment_biases(model, fit.params()),
+                    fitted,
+                )
+            },
         }
     }
 

@@ -738,3 +738,30 @@ fn check_fails_on_a_problem_the_default_reading_leaves_and_json_says_what_made_i
     let c: serde_json::Value = serde_json::from_slice(&check.stdout).unwrap();
     assert_eq!(c["schema_version"], 2);
 }
+
+#[test]
+fn the_summary_gives_the_bias_the_sensor_had_not_only_its_constant_part() {
+    // Berlin's yaw-rate sensor: the constant part reads 0.179 deg/s, while
+    // the segments move it by -0.13 to -0.09: the bias it had is 0.05-0.09.
+    let berlin = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/real/smartloc-berlin-potsdamer-platz/ride.csv"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let report = dir.path().join("r.json");
+    let out = gyropath(&["fit", berlin, "--report", s(&report)]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("bias      total z "), "{text}");
+    assert!(text.contains("gyro_bias (constant part): "), "{text}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let z = &r["bias_total"][2];
+    let mean = z["mean_dps"].as_f64().unwrap();
+    assert!((0.04..0.09).contains(&mean), "{z}");
+    assert!(z["min_dps"].as_f64().unwrap() <= mean && mean <= z["max_dps"].as_f64().unwrap());
+    assert!(
+        r["bias_total"][0].is_null(),
+        "a yaw-rate sensor has no roll bias"
+    );
+}
