@@ -83,3 +83,20 @@ pub fn simulated_signals(seed: u64, duration_s: f64, hidden: &[&str]) -> Signals
     Signals::from_log(&crate::import::parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
         .expect("signals")
 }
+
+/// The true path of [`simulated_signals`]' ride, as a reference track.
+pub fn simulated_truth(
+    seed: u64,
+    duration_s: f64,
+    hidden: &[&str],
+) -> crate::import::reference::ReferenceTrack {
+    let sim = crate::simulation::simulate(&crate::simulation::SimConfig {
+        seed,
+        duration_s,
+        hidden: hidden.iter().map(|s| s.to_string()).collect(),
+        ..Default::default()
+    })
+    .expect("simulate");
+    crate::import::reference::parse_reference(sim.truth_csv.as_bytes(), "truth.csv")
+        .expect("the simulator's truth reads")
+}

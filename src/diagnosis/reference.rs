@@ -294,6 +294,92 @@ pub fn compare(
     }
 }
 
+/// What a ride's GPS errors look like against a reference: the statistics
+/// that tell a city's reflections from an open sky's wander, to set a
+/// simulated ride beside a real one (`examples/gps_errors.rs`).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct GpsErrorStatistics {
+    /// Fixes on covered rows.
+    pub fixes: usize,
+    /// Horizontal distance of the fixes from the reference.
+    pub error: ErrorStats,
+    /// Share of fixes more than 15 m off, and the mean length (in fixes) of
+    /// a run of them.
+    pub over_15m: f64,
+    pub mean_run_over_15m: f64,
+    /// Correlation of the error (east and north pooled, each about its
+    /// mean) between fixes 1, 5, 10 and 30 s apart (within 0.25 s).
+    pub correlation: [(f64, Option<f64>); 4],
+    /// Share of the covered whole seconds that hold a fix.
+    pub availability: f64,
+}
+
+impl GpsErrorStatistics {
+    pub fn of(signals: &Signals, matched: &Matched) -> Option<Self> {
+        let at: std::collections::HashMap<usize, Vector3<f64>> =
+            matched.at_rows.iter().copied().collect();
+        let errors: Vec<(f64, [f64; 2])> = signals
+            .fixes
+            .iter()
+            .filter_map(|f| {
+                let r = at.get(&f.row)?;
+                Some((f.t, [f.en[0] - r.x, f.en[1] - r.y]))
+            })
+            .collect();
+        if errors.len() < 2 {
+            return None;
+        }
+        let distances: Vec<f64> = errors.iter().map(|(_, e)| e[0].hypot(e[1])).collect();
+        let over: Vec<bool> = distances.iter().map(|d| *d > 15.0).collect();
+        let runs = over.windows(2).filter(|w| w[1] && !w[0]).count() + usize::from(over[0]);
+        let n_over = over.iter().filter(|o| **o).count();
+        let mean =
+            [0, 1].map(|a| errors.iter().map(|(_, e)| e[a]).sum::<f64>() / errors.len() as f64);
+        let var: f64 = errors
+            .iter()
+            .map(|(_, e)| (e[0] - mean[0]).powi(2) + (e[1] - mean[1]).powi(2))
+            .sum::<f64>()
+            / errors.len() as f64;
+        let correlation = [1.0, 5.0, 10.0, 30.0].map(|lag| {
+            let mut k = 0usize;
+            let (mut sum, mut n) = (0.0, 0usize);
+            for (t, e) in &errors {
+                while k < errors.len() && errors[k].0 < t + lag - 0.25 {
+                    k += 1;
+                }
+                if let Some((u, g)) = errors.get(k)
+                    && (u - t - lag).abs() <= 0.25
+                {
+                    sum +=
+                        (e[0] - mean[0]) * (g[0] - mean[0]) + (e[1] - mean[1]) * (g[1] - mean[1]);
+                    n += 1;
+                }
+            }
+            (lag, (n >= 10 && var > 0.0).then(|| sum / n as f64 / var))
+        });
+        let t = &signals.t;
+        let covered: std::collections::BTreeSet<i64> = matched
+            .at_rows
+            .iter()
+            .map(|(j, _)| t[*j].round() as i64)
+            .collect();
+        let with_fix: std::collections::BTreeSet<i64> =
+            errors.iter().map(|(t, _)| t.round() as i64).collect();
+        Some(Self {
+            fixes: errors.len(),
+            error: ErrorStats::of(distances)?,
+            over_15m: n_over as f64 / errors.len() as f64,
+            mean_run_over_15m: if runs > 0 {
+                n_over as f64 / runs as f64
+            } else {
+                0.0
+            },
+            correlation,
+            availability: with_fix.len() as f64 / covered.len().max(1) as f64,
+        })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use std::sync::Arc;
@@ -385,5 +471,22 @@ mod tests {
         assert!((s.p95_m - 95.0).abs() <= 1.0);
         assert!((s.rms_m - (338350.0f64 / 100.0).sqrt()).abs() < 1e-9);
         assert!(ErrorStats::of(Vec::new()).is_none());
+    }
+
+    #[test]
+    fn the_gps_error_statistics_of_a_simulated_ride_are_its_own() {
+        // The open-sky simulator: a 1.5 m wander over 60 s plus 0.5 m of
+        // jitter, a fix nearly every second outside its outages.
+        let sig = crate::testing::simulated_signals(3, 600.0, &[]);
+        let truth = crate::testing::simulated_truth(3, 600.0, &[]);
+        let m = match_rows(&sig, &truth).unwrap();
+        let g = GpsErrorStatistics::of(&sig, &m).unwrap();
+        assert!(g.fixes > 400, "{g:?}");
+        assert!((1.0..3.0).contains(&g.error.median_m), "{g:?}");
+        assert_eq!(g.over_15m, 0.0);
+        let c1 = g.correlation[0].1.unwrap();
+        let c30 = g.correlation[3].1.unwrap();
+        assert!(c1 > 0.8 && c30 < c1, "{g:?}");
+        assert!((0.7..=1.0).contains(&g.availability), "{g:?}");
     }
 }
