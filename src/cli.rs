@@ -179,6 +179,9 @@ pub struct FitArgs {
     /// Print nothing but errors.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Also print every iteration's cost and the segment lengths' -2 ln L.
+    #[arg(long, short)]
+    pub verbose: bool,
 }
 
 #[derive(Debug, Args)]
@@ -208,6 +211,9 @@ pub struct DiagnoseArgs {
     /// Print nothing but errors and the table.
     #[arg(long, short)]
     pub quiet: bool,
+    /// Also print the residuals' whiteness (Ljung-Box) and structure.
+    #[arg(long, short)]
+    pub verbose: bool,
 }
 
 /// The model and optimiser options shared by `fit` and `diagnose`.
@@ -471,12 +477,12 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         bar.enable_steady_tick(std::time::Duration::from_millis(120));
         bar
     });
-    let quiet = args.quiet;
+    let verbose = args.verbose && !args.quiet;
     fit.run(&mut |_: &Reconstruction, r: &IterationReport| {
         let line = progress_line(r);
         match &bar {
             Some(b) => b.set_message(line),
-            None if !quiet => eprintln!("{line}"),
+            None if verbose => eprintln!("{line}"),
             None => {}
         }
     });
@@ -503,7 +509,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     }
     if !args.quiet {
         // Data on standard output: the summary goes to standard error.
-        let summary = summary_text(&report);
+        let summary = summary_text(&report, args.verbose);
         if data_on_stdout {
             eprint!("{summary}");
         } else {
@@ -807,7 +813,7 @@ fn fit_batch(args: &FitArgs) -> Result<()> {
 const SEGMENT_EVIDENCE: f64 = 4.0;
 
 /// The terminal summary of a fit.
-fn summary_text(r: &FitReport) -> String {
+fn summary_text(r: &FitReport, verbose: bool) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
     _ = writeln!(
@@ -833,7 +839,12 @@ fn summary_text(r: &FitReport) -> String {
             )
         }
     }
-    if let Some(&(best, _)) = r.segment_preference.iter().find(|v| v.1 == 0.0) {
+    if let Some(&(best, _)) = r
+        .segment_preference
+        .iter()
+        .find(|v| v.1 == 0.0)
+        .filter(|_| verbose)
+    {
         let spread = r.segment_preference.iter().map(|v| v.1).fold(0.0, f64::max);
         let lengths: Vec<String> = r
             .segment_preference
@@ -996,7 +1007,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     if let Some(path) = &args.json {
         write_report(path, &args.ride, &diagnosis)?;
     }
-    let mut table = diagnosis_text(&diagnosis);
+    let mut table = diagnosis_text(&diagnosis, &args.ride, args.verbose);
     if !args.quiet {
         table += &format!("time      {:.2} s\n", started.elapsed().as_secs_f64());
     }
@@ -1016,9 +1027,46 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
 }
 
 /// The terminal table of a diagnosis.
-fn diagnosis_text(d: &Diagnosis) -> String {
+fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
+    // The answer first, in plain words, with the next command to run.
+    let added: Vec<&str> = d
+        .model
+        .iter()
+        .map(String::as_str)
+        .filter(|id| !gyropath::effects::PAPER.contains(id) && *id != "baro_offset")
+        .collect();
+    match d.ranking.first() {
+        _ if !d.not_physical.is_empty() => {
+            _ = writeln!(
+                out,
+                "answer    the model's own fit is not physical: fix the axes or units first (see below)"
+            );
+        }
+        Some(best) if best.significant => {
+            let estimate: Vec<String> = best.estimate.values().map(|e| e.describe()).collect();
+            let effects: Vec<&str> = added
+                .iter()
+                .copied()
+                .chain(std::iter::once(best.effect.as_str()))
+                .collect();
+            _ = writeln!(
+                out,
+                "missing:  {} ({}); add it: gyropath fit {} --effects {}",
+                best.effect,
+                estimate.join(", "),
+                ride.display(),
+                effects.join(",")
+            );
+        }
+        _ => {
+            _ = writeln!(
+                out,
+                "answer    nothing missing: no catalogue effect lowers the held-out error beyond chance"
+            );
+        }
+    }
     _ = writeln!(out, "model     {}", d.model.join(", "));
     _ = writeln!(
         out,
@@ -1053,7 +1101,7 @@ fn diagnosis_text(d: &Diagnosis) -> String {
         .map(|c| format!("{} ~ {} r={:+.2}", c.quantity, c.signal, c.r))
         .collect();
     _ = writeln!(out, "structure {}", strong.join(", "));
-    if let Some(w) = &d.whiteness {
+    if let Some(w) = d.whiteness.as_ref().filter(|_| verbose) {
         let parts: Vec<String> = w
             .iter()
             .map(|c| {

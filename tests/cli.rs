@@ -46,6 +46,7 @@ fn simulate_then_fit_writes_path_and_report() {
         s(&report),
         "--segment-s",
         "10",
+        "--verbose",
     ]);
     assert!(
         out.status.success(),
@@ -54,8 +55,10 @@ fn simulate_then_fit_writes_path_and_report() {
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("rms       horizontal"), "{stdout}");
-    // Plain progress lines when stderr is not a terminal.
+    // With --verbose: plain progress lines when stderr is not a terminal,
+    // and the segment lengths' -2 ln L.
     assert!(String::from_utf8_lossy(&out.stderr).contains("step 2 lm"));
+    assert!(stdout.contains("-2 ln L"), "{stdout}");
 
     let ride_rows = std::fs::read_to_string(&ride)
         .unwrap()
@@ -764,4 +767,29 @@ fn the_summary_gives_the_bias_the_sensor_had_not_only_its_constant_part() {
         r["bias_total"][0].is_null(),
         "a yaw-rate sensor has no roll bias"
     );
+}
+
+#[test]
+fn diagnose_starts_with_the_answer_and_the_command_that_adds_it() {
+    let comma = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    );
+    let out = gyropath(&["diagnose", comma, "--quiet"]);
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let first = text.lines().next().unwrap_or_default();
+    assert!(
+        first.starts_with("missing:  gps_lag (0.0")
+            && first.ends_with(&format!("add it: gyropath fit {comma} --effects gps_lag")),
+        "{first}"
+    );
+    // Ljung-Box statistics only with --verbose.
+    assert!(!text.contains("Ljung-Box"), "{text}");
+    let out = gyropath(&["diagnose", comma, "--quiet", "--verbose"]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("Ljung-Box"));
+    // A plain fit prints no iteration lines and no -2 ln L.
+    let out = gyropath(&["fit", comma]);
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("step 2 lm"));
+    assert!(!String::from_utf8_lossy(&out.stdout).contains("-2 ln L"));
 }
