@@ -992,10 +992,33 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
         guard_s: args.guard_s,
     };
     let quiet = args.quiet;
-    let progress = move |msg: &str| {
-        if !quiet {
-            eprintln!("{msg}");
+    // On a terminal a bar with the time left (the candidates' refits are
+    // most of a diagnosis); elsewhere one line per step.
+    let bar = (std::io::stderr().is_terminal() && !quiet).then(|| {
+        let bar = indicatif::ProgressBar::new(3);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {pos}/{len} {msg} ({elapsed}, about {eta} left)",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+        );
+        bar.enable_steady_tick(std::time::Duration::from_millis(200));
+        bar
+    });
+    let progress = |msg: &str| match &bar {
+        Some(b) => {
+            // "tried gps_lag (2 of 6)": the steps are then known.
+            if let Some(total) = msg
+                .rsplit_once(" of ")
+                .and_then(|(_, n)| n.trim_end_matches(')').parse::<u64>().ok())
+            {
+                b.set_length(total + 3);
+            }
+            b.inc(1);
+            b.set_message(msg.to_string());
         }
+        None if !quiet => eprintln!("{msg}"),
+        None => {}
     };
     let diagnosis = gyropath::diagnosis::diagnose_against(
         signals,
@@ -1004,6 +1027,9 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
         reference.as_ref().zip(matched.as_ref()),
         &progress,
     )?;
+    if let Some(b) = &bar {
+        b.finish_and_clear();
+    }
     if let Some(path) = &args.json {
         write_report(path, &args.ride, &diagnosis)?;
     }
