@@ -40,7 +40,9 @@ pub enum Command {
     Simulate(SimulateArgs),
     /// Fit the model, then rank the effects it lacks by how much each lowers the held-out error.
     Diagnose(DiagnoseArgs),
-    /// Open the app on a ride log or bag (without arguments, `gyropath` opens it on the bundled sample).
+    /// Open the app on a ride log or bag; without one, on the bundled sample ride.
+    ///
+    /// Example: `gyropath open ride.csv`, `gyropath open test1.bag --mount auto`.
     Open(OpenArgs),
     /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder) or a mapped CSV to a ride-log CSV.
     Import(ImportArgs),
@@ -55,8 +57,9 @@ pub enum Command {
 
 #[derive(Debug, Args)]
 pub struct OpenArgs {
-    /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), or a CSV with --map.
-    pub ride: PathBuf,
+    /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), or
+    /// a CSV with --map; none: the bundled sample ride.
+    pub ride: Option<PathBuf>,
     #[command(flatten)]
     pub source: SourceArgs,
 }

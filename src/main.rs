@@ -12,10 +12,13 @@ fn main() {
         Some(cli::Command::Diagnose(a)) => cli::diagnose(a),
         Some(cli::Command::Import(a)) => cli::import(a),
         Some(cli::Command::Check(a)) => cli::check(a),
-        Some(cli::Command::Open(a)) => a
-            .source
-            .options()
-            .and_then(|o| open_app(Some((a.ride.clone(), o)))),
+        Some(cli::Command::Open(a)) => match &a.ride {
+            Some(ride) => a
+                .source
+                .options()
+                .and_then(|o| open_app(Some((ride.clone(), o)))),
+            None => open_app(None),
+        },
         None => open_app(None),
     };
     if let Err(e) = result {

@@ -793,3 +793,18 @@ fn diagnose_starts_with_the_answer_and_the_command_that_adds_it() {
     assert!(!String::from_utf8_lossy(&out.stderr).contains("step 2 lm"));
     assert!(!String::from_utf8_lossy(&out.stdout).contains("-2 ln L"));
 }
+
+#[test]
+fn open_without_a_file_opens_the_sample_as_its_help_says() {
+    // No display here: it gets as far as the window, not to a missing argument.
+    let out = Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .arg("open")
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("required"), "{err}");
+    assert!(err.contains("cannot open the app window"), "{err}");
+}
