@@ -267,3 +267,51 @@ fn without_a_tile_server_the_map_quietly_goes_without() {
     // The map itself is still there: the fixes' points are drawn.
     assert!(h.state().ride.as_ref().is_some_and(|r| !r.fixes.is_empty()));
 }
+
+#[test]
+fn the_reference_track_is_drawn_on_the_map_and_its_error_in_the_residual_plot() {
+    let drive = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz");
+    let app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::file(drive.join("ride.csv")),
+        || {},
+    );
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .wgpu()
+        .build_ui_state(|ui, app: &mut GyropathApp| app.ui(ui), app);
+    let wait = |h: &mut Harness<'_, GyropathApp>, done: &dyn Fn(&GyropathApp) -> bool| {
+        let start = Instant::now();
+        while !done(h.state()) {
+            assert!(
+                start.elapsed() < Duration::from_secs(180),
+                "timed out: {:?}",
+                h.state().error
+            );
+            h.step();
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        h.run();
+    };
+    wait(&mut h, &|a| {
+        a.snapshot.as_ref().is_some_and(|s| s.sigma.is_some())
+    });
+    let without = h.render().expect("render");
+    h.state_mut().apply(gyropath::app::Command::OpenReference(
+        drive.join("truth.csv"),
+    ));
+    wait(&mut h, &|a| {
+        a.snapshot.as_ref().is_some_and(|s| s.reference.is_some())
+    });
+    let with = h.render().expect("render");
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("berlin-reference.png");
+    with.save(&out).expect("png");
+    eprintln!("rendered {}", out.display());
+    // The map (left half, below the menu) gains the reference track; the
+    // residual plot (right half, bottom third of the plots) its distance.
+    let map = changed(&without, &with, 0.25..0.5, 0.1..0.7);
+    let plots = changed(&without, &with, 0.5..1.0, 0.45..0.7);
+    assert!(map > 300, "{map} map pixels changed");
+    assert!(plots > 100, "{plots} residual-plot pixels changed");
+}
