@@ -79,20 +79,26 @@ fn main() -> anyhow::Result<()> {
         let signals = open(&d.join("ride.csv"), &ImportOptions::default())?.into_signals()?;
         row(drive, &signals, &read_reference(&d.join("truth.csv"))?)?;
     }
-    for seed in [7, 8, 9, 10] {
-        let sim = simulate(&SimConfig {
-            seed,
-            duration_s: 600.0,
-            gps: GpsEnvironment::Urban,
-            ..SimConfig::default()
-        })?;
-        let signals = Signals::from_log(&gyropath::import::parse(sim.log_csv.as_bytes(), "sim")?)?;
-        let truth = parse_reference(sim.truth_csv.as_bytes(), "truth")?;
-        row(
-            &format!("simulate --gps urban --seed {seed}"),
-            &signals,
-            &truth,
-        )?;
+    for (gps, name) in [
+        (GpsEnvironment::Urban, "urban"),
+        (GpsEnvironment::City, "city"),
+    ] {
+        for seed in [7, 8, 9, 10] {
+            let sim = simulate(&SimConfig {
+                seed,
+                duration_s: 600.0,
+                gps,
+                ..SimConfig::default()
+            })?;
+            let signals =
+                Signals::from_log(&gyropath::import::parse(sim.log_csv.as_bytes(), "sim")?)?;
+            let truth = parse_reference(sim.truth_csv.as_bytes(), "truth")?;
+            row(
+                &format!("simulate --gps {name} --seed {seed}"),
+                &signals,
+                &truth,
+            )?;
+        }
     }
     Ok(())
 }

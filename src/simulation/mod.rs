@@ -15,6 +15,7 @@
 //! `(t_{k-1}, t_k]`, `Log(R_{k-1}^T R_k) / dt`, computed from the true
 //! attitudes: no integration scheme is shared with the model.
 
+pub mod reflections;
 pub mod rng;
 pub mod route;
 pub mod thermal;
@@ -328,6 +329,8 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
             config.duration_s,
         )
     });
+    let mut reflections = (config.gps == GpsEnvironment::City)
+        .then(|| reflections::Reflections::new(Rng::new(config.seed ^ 0x5EF1_EC71_0B5E_B111)));
     let extra_cols = match (bicycle, urban) {
         (true, false) => ",baro_alt_m,temp_c",
         (true, true) => ",baro_alt_m,temp_c,gps_hacc_m,sats",
@@ -425,7 +428,9 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
                     gm[2].next(&mut rng),
                 ) + Vector3::new(0.5 * rng.normal(), 0.5 * rng.normal(), 1.5 * rng.normal());
             let in_outage = outages.iter().any(|&(a, b)| t >= a && t < b);
-            if !in_outage {
+            // Among buildings the receiver has no solution in many seconds.
+            let reflected = reflections.as_mut().map(|r| r.fix(1.0 / gps_hz));
+            if !in_outage && reflected != Some(None) {
                 let seen =
                     gps_lag.map_or(st.position, |lag| route.state((t - lag).max(0.0)).position);
                 let mut p = seen + noise;
@@ -433,6 +438,9 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
                     if t >= e.0 && t < e.1 {
                         p += j;
                     }
+                }
+                if let Some(Some(r)) = reflected {
+                    p += r;
                 }
                 if let Some(c) = city.as_mut() {
                     let f = st.attitude * Vector3::x();

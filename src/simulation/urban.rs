@@ -29,6 +29,9 @@ pub enum GpsEnvironment {
     #[default]
     Open,
     Urban,
+    /// Reflections that come and go, calibrated on a real city drive (see
+    /// `simulation::reflections`).
+    City,
 }
 
 impl std::str::FromStr for GpsEnvironment {
@@ -37,7 +40,8 @@ impl std::str::FromStr for GpsEnvironment {
         match s {
             "open" => Ok(Self::Open),
             "urban" => Ok(Self::Urban),
-            other => Err(format!("gps '{other}' is neither open nor urban")),
+            "city" => Ok(Self::City),
+            other => Err(format!("gps '{other}' is none of open, urban, city")),
         }
     }
 }
