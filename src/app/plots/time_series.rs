@@ -3,7 +3,7 @@
 //! and the hovered time reported so the map can mark it.
 
 use egui::Id;
-use egui_plot::{HLine, Legend, Line, LineStyle, Plot, VLine};
+use egui_plot::{HLine, Legend, Line, LineStyle, Plot, Polygon};
 
 use super::axes::{decimate, nice_grid, nice_grid_y, tick_label, view};
 use super::{AXES, OUTAGE};
@@ -175,9 +175,27 @@ fn fix_series_ui(
                 );
             }
         }
-        for &(a, b) in &ride.outages {
-            plot.vline(VLine::new("GPS outage", a - t0).color(OUTAGE));
-            plot.vline(VLine::new("GPS outage", b - t0).color(OUTAGE));
+        // Outages lightly shaded over the values' own range (a real city
+        // drive has dozens: as pairs of lines they were a wall of pink).
+        let values = res
+            .iter()
+            .flat_map(|r| series.iter().filter_map(move |(_, f)| f(r)))
+            .filter(|v| v.is_finite());
+        let (y0, y1) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+        if y0 < y1 {
+            for &(a, b) in &ride.outages {
+                plot.polygon(
+                    Polygon::new(
+                        "GPS outage",
+                        vec![[a - t0, y0], [b - t0, y0], [b - t0, y1], [a - t0, y1]],
+                    )
+                    .fill_color(OUTAGE.gamma_multiply(0.12))
+                    .stroke(egui::Stroke::NONE)
+                    .allow_hover(false),
+                );
+            }
         }
         hovered_time(plot, t0)
     });
