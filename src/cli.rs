@@ -35,16 +35,29 @@ pub struct Cli {
 #[derive(Debug, Subcommand)]
 pub enum Command {
     /// Fit the model to a ride log and write the reconstructed path.
+    ///
+    /// Example: `gyropath fit ride.csv --out path.csv --report report.json`;
+    /// with a GPS lag added and a reference track:
+    /// `gyropath fit ride.csv --effects gps_lag --reference truth.csv`;
+    /// a folder of rides: `gyropath fit rides/ --out-dir results/`.
     Fit(FitArgs),
-    /// Write a simulated bicycle ride (and its true path).
+    /// Write a simulated ride (and its true path).
+    ///
+    /// Example: `gyropath simulate --seed 7 --gps city --out ride.csv --truth truth.csv`.
     Simulate(SimulateArgs),
     /// Fit the model, then rank the effects it lacks by how much each lowers the held-out error.
+    ///
+    /// It starts with the answer and the command that adds the missing
+    /// effect. Example: `gyropath diagnose ride.csv --reference truth.csv --json diagnosis.json`.
     Diagnose(DiagnoseArgs),
     /// Open the app on a ride log or bag; without one, on the bundled sample ride.
     ///
     /// Example: `gyropath open ride.csv`, `gyropath open test1.bag --mount auto`.
     Open(OpenArgs),
     /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder) or a mapped CSV to a ride-log CSV.
+    ///
+    /// Example: `gyropath import test1.bag --out ride.csv`;
+    /// `gyropath import logger.csv --map logger.toml --out ride.csv`.
     Import(ImportArgs),
     /// Check a log's axes, units and datum against its own data, and recommend a mounting.
     ///

@@ -808,3 +808,16 @@ fn open_without_a_file_opens_the_sample_as_its_help_says() {
     assert!(!err.contains("required"), "{err}");
     assert!(err.contains("cannot open the app window"), "{err}");
 }
+
+#[test]
+fn every_subcommands_help_has_an_example() {
+    for sub in ["fit", "diagnose", "simulate", "import", "check", "open"] {
+        let out = gyropath(&[sub, "--help"]);
+        assert!(out.status.success(), "{sub}");
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            text.contains(&format!("Example: `gyropath {sub} ")),
+            "{sub} --help: {text}"
+        );
+    }
+}
