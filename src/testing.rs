@@ -73,13 +73,7 @@ pub fn winding_signals(duration: f64, rate_hz: f64) -> Signals {
 
 /// Signals of a simulated ride (`hidden`: effect ids of the simulator).
 pub fn simulated_signals(seed: u64, duration_s: f64, hidden: &[&str]) -> Signals {
-    let sim = crate::simulation::simulate(&crate::simulation::SimConfig {
-        seed,
-        duration_s,
-        hidden: hidden.iter().map(|s| s.to_string()).collect(),
-        ..Default::default()
-    })
-    .expect("simulate");
+    let sim = simulated(seed, duration_s, hidden);
     Signals::from_log(&crate::import::parse(sim.log_csv.as_bytes(), "sim.csv").expect("parse"))
         .expect("signals")
 }
@@ -90,13 +84,18 @@ pub fn simulated_truth(
     duration_s: f64,
     hidden: &[&str],
 ) -> crate::import::reference::ReferenceTrack {
-    let sim = crate::simulation::simulate(&crate::simulation::SimConfig {
+    let sim = simulated(seed, duration_s, hidden);
+    crate::import::reference::parse_reference(sim.truth_csv.as_bytes(), "truth.csv")
+        .expect("the simulator's truth reads")
+}
+
+/// A simulated bicycle ride on open sky (`hidden`: effect ids of the simulator).
+fn simulated(seed: u64, duration_s: f64, hidden: &[&str]) -> crate::simulation::SimulatedRide {
+    crate::simulation::simulate(&crate::simulation::SimConfig {
         seed,
         duration_s,
         hidden: hidden.iter().map(|s| s.to_string()).collect(),
         ..Default::default()
     })
-    .expect("simulate");
-    crate::import::reference::parse_reference(sim.truth_csv.as_bytes(), "truth.csv")
-        .expect("the simulator's truth reads")
+    .expect("simulate")
 }
