@@ -735,7 +735,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
         params,
         n_params: model.n_params(),
         effects: model.effect_ids(),
-        violations: crate::diagnosis::limits::check(model, theta)
+        violations: crate::diagnosis::limits::check_on(model, theta, &sparse)
             .iter()
             .map(ToString::to_string)
             .collect(),

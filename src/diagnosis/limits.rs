@@ -14,7 +14,7 @@
 //! | gyro scale error | 20 % | MEMS scale errors are a few percent; 57x or 1/57 is rad/s against deg/s |
 
 use crate::effects::DEG_PER_RAD;
-use crate::model::Model;
+use crate::model::{Model, PathAt};
 
 use super::Estimate;
 
@@ -47,8 +47,16 @@ impl std::fmt::Display for Violation {
 /// parameters' ([`parameters`]) and its path's distance from the fixes
 /// ([`path_far_from_fixes`]).
 pub fn check(model: &Model, theta: &[f64]) -> Vec<Violation> {
+    let mut rows: Vec<usize> = model.signals.fixes.iter().map(|f| f.row).collect();
+    rows.dedup();
+    check_on(model, theta, &model.sparse_path(theta, rows))
+}
+
+/// [`check`] on a path already swept at `theta` that holds every fix's row
+/// (as the residual rows of a snapshot do): no sweep of its own.
+pub fn check_on(model: &Model, theta: &[f64], path: &impl PathAt) -> Vec<Violation> {
     let mut out = parameters(model, theta);
-    out.extend(path_far_from_fixes(model, theta));
+    out.extend(path_far_from_fixes(model, path));
     out
 }
 
@@ -76,21 +84,15 @@ pub fn fix_scatter_m(fixes: &[crate::signals::Fix]) -> Option<f64> {
 /// The path is far worse than the fixes' own scatter: the model cannot follow
 /// the GPS (a path effect left out of the model, wrong axes or units), and its
 /// path is no result, however well the optimiser converged.
-pub fn path_far_from_fixes(model: &Model, theta: &[f64]) -> Option<Violation> {
+/// `path` must hold every fix's row.
+pub fn path_far_from_fixes(model: &Model, path: &impl PathAt) -> Option<Violation> {
     let fixes = &model.signals.fixes;
     let scatter = fix_scatter_m(fixes)?;
-    let rows: Vec<usize> = {
-        let mut r: Vec<usize> = fixes.iter().map(|f| f.row).collect();
-        r.dedup();
-        r
-    };
-    let path = model.sparse_path(theta, rows.clone());
     let mut distances: Vec<f64> = fixes
         .iter()
-        .filter_map(|f| {
-            let k = rows.binary_search(&f.row).ok()?;
-            let p = path.p_of(k);
-            Some((p.x - f.en[0]).hypot(p.y - f.en[1]))
+        .map(|f| {
+            let p = path.p_at(f.row);
+            (p.x - f.en[0]).hypot(p.y - f.en[1])
         })
         .collect();
     if distances.is_empty() {
@@ -248,10 +250,10 @@ mod tests {
         let start = model
             .range(model.effect_index("initial_position").unwrap())
             .start;
-        let near = path_far_from_fixes(&model, &theta);
+        let near = path_far_from_fixes(&model, &model.trajectory(&theta));
         assert!(near.is_none(), "{near:?}");
         theta[start] += 500.0;
-        let v = path_far_from_fixes(&model, &theta).expect("500 m off");
+        let v = path_far_from_fixes(&model, &model.trajectory(&theta)).expect("500 m off");
         assert!(
             v.value.starts_with("50") || v.value.starts_with("49"),
             "{v}"
@@ -260,6 +262,11 @@ mod tests {
             check(&model, &theta)
                 .iter()
                 .any(|c| c.quantity == v.quantity)
+        );
+        theta[start] -= 460.0;
+        assert!(
+            path_far_from_fixes(&model, &model.trajectory(&theta)).is_none(),
+            "40 m off is what a street canyon can do"
         );
     }
 
