@@ -441,16 +441,10 @@ impl Worker {
             .step_by(stride)
             .map(|(j, r)| [sig.t[*j], r.x, r.y])
             .collect();
-        let covered_s = matched
-            .at_rows
-            .windows(2)
-            .filter(|w| w[1].0 == w[0].0 + 1)
-            .map(|w| sig.dt[w[1].0])
-            .sum();
         let view = ReferenceView {
             name: track.source.clone(),
             points,
-            covered_s,
+            covered_s: matched.covered_s(sig),
         };
         ride.reference = Some(Arc::new((track, matched)));
         self.send(Update::ReferenceLoaded(Box::new(view)));

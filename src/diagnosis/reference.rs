@@ -143,6 +143,18 @@ pub struct Matched {
     pub at_rows: Vec<(usize, Vector3<f64>)>,
 }
 
+impl Matched {
+    /// The ride time it covers (s): the step `dt_j` of every covered row
+    /// whose row before it is covered too.
+    pub fn covered_s(&self, signals: &Signals) -> f64 {
+        self.at_rows
+            .windows(2)
+            .filter(|w| w[1].0 == w[0].0 + 1)
+            .map(|w| signals.dt[w[1].0])
+            .sum()
+    }
+}
+
 /// Match `reference` to the rows of `signals` (see the module documentation).
 pub fn match_rows(
     signals: &Signals,
@@ -208,8 +220,9 @@ pub fn match_rows(
     Ok(Matched { at_rows })
 }
 
-/// The horizontal distance of every fix on a covered row from the reference there.
-fn fix_distances(signals: &Signals, at_rows: &[(usize, Vector3<f64>)]) -> Vec<f64> {
+/// `(t, [east, north])`: the error of every fix on a covered row against
+/// the reference there (m), in row order.
+fn fix_errors(signals: &Signals, at_rows: &[(usize, Vector3<f64>)]) -> Vec<(f64, [f64; 2])> {
     let mut out = Vec::new();
     let mut k = 0usize;
     for f in &signals.fixes {
@@ -219,10 +232,18 @@ fn fix_distances(signals: &Signals, at_rows: &[(usize, Vector3<f64>)]) -> Vec<f6
         if let Some((row, r)) = at_rows.get(k)
             && *row == f.row
         {
-            out.push((f.en[0] - r.x).hypot(f.en[1] - r.y));
+            out.push((f.t, [f.en[0] - r.x, f.en[1] - r.y]));
         }
     }
     out
+}
+
+/// The horizontal distance of every fix on a covered row from the reference there.
+fn fix_distances(signals: &Signals, at_rows: &[(usize, Vector3<f64>)]) -> Vec<f64> {
+    fix_errors(signals, at_rows)
+        .iter()
+        .map(|(_, e)| e[0].hypot(e[1]))
+        .collect()
 }
 
 /// Compare the path of `model` at `theta` with the matched reference.
@@ -242,7 +263,6 @@ pub fn compare(
         Vec::new(),
     );
     let mut series = Vec::with_capacity(n);
-    let mut covered_s = 0.0;
     let mut next = 0usize;
     model.for_each_pose(theta, |j, q, p| {
         let Some(&(row, r)) = matched.at_rows.get(next) else {
@@ -268,17 +288,13 @@ pub fn compare(
             vertical.push(e.z);
         }
         series.push((sig.t[j], dist));
-        // The row's time step, where the row before it is covered too.
-        if j > 0 && next >= 2 && matched.at_rows[next - 2].0 == j - 1 {
-            covered_s += sig.dt[j];
-        }
     });
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len().max(1) as f64).sqrt();
     let fixes = fix_distances(sig, &matched.at_rows);
     ReferenceComparison {
         reference: reference.source.clone(),
         rows: horizontal.len(),
-        covered_s,
+        covered_s: matched.covered_s(sig),
         ride_s: sig.duration(),
         along_rms_m: rms(&along),
         cross_rms_m: rms(&cross),
@@ -316,16 +332,7 @@ pub struct GpsErrorStatistics {
 
 impl GpsErrorStatistics {
     pub fn of(signals: &Signals, matched: &Matched) -> Option<Self> {
-        let at: std::collections::HashMap<usize, Vector3<f64>> =
-            matched.at_rows.iter().copied().collect();
-        let errors: Vec<(f64, [f64; 2])> = signals
-            .fixes
-            .iter()
-            .filter_map(|f| {
-                let r = at.get(&f.row)?;
-                Some((f.t, [f.en[0] - r.x, f.en[1] - r.y]))
-            })
-            .collect();
+        let errors = fix_errors(signals, &matched.at_rows);
         if errors.len() < 2 {
             return None;
         }
