@@ -10,10 +10,12 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use gyropath::diagnosis::{Diagnosis, Folds, limits, reference};
 use gyropath::export::{
-    FitReport, PathFormat, check_report_name, write_atomically, write_json, write_path_csv,
-    write_path_gpx,
+    FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
+    write_path_csv, write_path_gpx,
 };
-use gyropath::import::{self, ImportOptions, Imported, Level, MountChoice, TopicChoice};
+use gyropath::import::{
+    self, ImportOptions, Imported, Level, MountChoice, ReferenceTrack, TopicChoice,
+};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
 use gyropath::optimisation::{
     AutoNoise, FitSettings, IterationReport, Method, Phase, Reconstruction,
@@ -467,11 +469,11 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let Some(rep) = &args.report {
         check_report_name(rep)?;
     }
-    let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(on_stdout);
+    let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(is_stdout);
     if to_stdout(&args.out) && to_stdout(&args.report) {
         anyhow::bail!("--out and --report cannot both go to standard output");
     }
-    let data_on_stdout = to_stdout(&args.out) || to_stdout(&args.report);
+    let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.report);
     let reference = args
         .reference
         .as_deref()
@@ -483,11 +485,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    // A reference of another drive is refused before the fit.
-    let matched = reference
-        .as_ref()
-        .map(|r| reference::match_rows(&signals, r))
-        .transpose()?;
+    let against = matched_reference(reference, &signals)?;
     let mut fit = Reconstruction::new(signals, settings)?;
     let terminal = std::io::stderr().is_terminal() && !args.quiet;
     let bar = terminal.then(|| {
@@ -516,7 +514,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
         None => FitReport::new(&fit, elapsed),
     };
-    if let (Some(r), Some(m)) = (&reference, &matched) {
+    if let Some((r, m)) = &against {
         report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
     }
     if let (Some(out), Some(format)) = (&args.out, path_format) {
@@ -528,7 +526,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if !args.quiet {
         // Data on standard output: the summary goes to standard error.
         let summary = summary_text(&report, args.verbose);
-        if data_on_stdout {
+        if data_is_stdout {
             eprint!("{summary}");
         } else {
             print!("{summary}");
@@ -557,11 +555,6 @@ fn write_path(
         }
     }
     .context("the path could not be written")
-}
-
-/// Whether an output named `path` goes to standard output.
-fn on_stdout(path: &Path) -> bool {
-    path.as_os_str() == "-" || path == Path::new("/dev/stdout")
 }
 
 /// Write a JSON report to `out`.
@@ -678,6 +671,21 @@ fn output_stems(rides: &[PathBuf]) -> Result<Vec<String>> {
     }
 }
 
+/// Match a reference track (read before the ride, so that a bad file fails
+/// before a long load) to the ride's rows: one of another drive fails here,
+/// before the fit.
+fn matched_reference(
+    reference: Option<ReferenceTrack>,
+    signals: &Signals,
+) -> Result<Option<(ReferenceTrack, reference::Matched)>> {
+    reference
+        .map(|r| {
+            let m = reference::match_rows(signals, &r)?;
+            Ok((r, m))
+        })
+        .transpose()
+}
+
 /// A batch ride's reference: `reference` itself where it exists, else a file
 /// of that name beside the ride (none if there is none).
 fn reference_for(ride: &Path, reference: Option<&Path>) -> Option<PathBuf> {
@@ -704,10 +712,7 @@ fn fit_one(
         .map(|p| import::read_reference(&p))
         .transpose()?;
     let signals = Arc::new(load_signals(ride, source, true)?);
-    let matched = reference
-        .as_ref()
-        .map(|r| reference::match_rows(&signals, r))
-        .transpose()?;
+    let against = matched_reference(reference, &signals)?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;
@@ -717,7 +722,7 @@ fn fit_one(
         Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
         None => FitReport::new(&fit, elapsed),
     };
-    if let (Some(r), Some(m)) = (&reference, &matched) {
+    if let Some((r, m)) = &against {
         report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
     }
     if let Some(dir) = out_dir {
@@ -1000,10 +1005,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let matched = reference
-        .as_ref()
-        .map(|r| reference::match_rows(&signals, r))
-        .transpose()?;
+    let against = matched_reference(reference, &signals)?;
     let folds = Folds {
         block_s: args.block_s,
         k: args.folds,
@@ -1042,7 +1044,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
         signals,
         &settings,
         &folds,
-        reference.as_ref().zip(matched.as_ref()),
+        against.as_ref().map(|(r, m)| (r, m)),
         &progress,
     )?;
     if let Some(b) = &bar {
@@ -1055,7 +1057,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     if !args.quiet {
         table += &format!("time      {:.2} s\n", started.elapsed().as_secs_f64());
     }
-    if args.json.as_deref().is_some_and(on_stdout) {
+    if args.json.as_deref().is_some_and(is_stdout) {
         eprint!("{table}");
     } else {
         print!("{table}");
@@ -1324,7 +1326,7 @@ pub fn check(args: &CheckArgs) -> Result<()> {
             )
         }
     }
-    if args.json.as_deref().is_some_and(on_stdout) {
+    if args.json.as_deref().is_some_and(is_stdout) {
         eprint!("{text}");
     } else {
         print!("{text}");

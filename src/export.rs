@@ -50,7 +50,7 @@ pub fn write_atomically(
         path: path.display().to_string(),
         source,
     };
-    if path.as_os_str() == "-" || path == Path::new("/dev/stdout") {
+    if is_stdout(path) {
         let mut out = std::io::stdout().lock();
         return fill(&mut out).and_then(|_| out.flush()).map_err(io);
     }
@@ -98,6 +98,11 @@ pub fn write_atomically(
         let _ = std::fs::remove_file(&tmp);
     }
     result.map_err(io)
+}
+
+/// Whether an output named `path` goes to standard output (`-` or `/dev/stdout`).
+pub fn is_stdout(path: &Path) -> bool {
+    path.as_os_str() == "-" || path == Path::new("/dev/stdout")
 }
 
 /// A file that is written in place, never replaced: anything under `/dev` or
