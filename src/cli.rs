@@ -11,7 +11,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use gyropath::diagnosis::{Diagnosis, Folds, limits, reference};
 use gyropath::export::{
     FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
-    write_path_csv, write_path_gpx,
+    write_path_csv, write_path_gpx, write_path_tum,
 };
 use gyropath::import::{
     self, ImportOptions, Imported, Level, MountChoice, ReferenceTrack, TopicChoice,
@@ -38,7 +38,7 @@ pub struct Cli {
 pub enum Command {
     /// Fit the model to a ride log and write the reconstructed path.
     ///
-    /// Example: `gyropath fit ride.csv --out path.csv --report report.json`;
+    /// Example: `gyropath fit ride.csv --out path.csv --json report.json`;
     /// with a GPS lag added and a reference track:
     /// `gyropath fit ride.csv --effects gps_lag --reference truth.csv`;
     /// a folder of rides: `gyropath fit rides/ --out-dir results/`.
@@ -91,16 +91,16 @@ pub struct SourceArgs {
     /// Bag topic of the GPS (sensor_msgs/NavSatFix).
     #[arg(long)]
     pub fix: Option<String>,
-    /// Sensor mounting: `auto` (what `check` recommends; the default for bags), `none` (as
-    /// logged; the default for CSV), or a mapping such as "x=-z,y=-x,z=y".
-    #[arg(long, default_value = "default")]
-    pub mount: String,
+    /// Sensor mounting: `auto` (what `check` recommends), `none` (as logged), or a
+    /// mapping such as "x=-z,y=-x,z=y". Not given: `auto` for bags, `none` for CSV.
+    #[arg(long)]
+    pub mount: Option<String>,
     /// TOML column map: read the input as a mapped CSV (see README).
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Second CSV with the GPS fixes of a mapped CSV, joined by time.
     #[arg(long)]
-    pub gps: Option<PathBuf>,
+    pub gps_csv: Option<PathBuf>,
     /// Attitude model: `auto` (planar for yaw-rate sensors and vehicles that stay
     /// level, else 3D), `3d`, or `planar` (heading only).
     #[arg(long, default_value = "auto")]
@@ -109,13 +109,13 @@ pub struct SourceArgs {
 
 impl SourceArgs {
     pub fn options(&self) -> Result<ImportOptions> {
-        let mount: MountChoice = self
-            .mount
-            .parse()
-            .map_err(|e| anyhow::anyhow!("--mount: {e}"))?;
-        if self.gps.is_some() && self.map.is_none() {
+        let mount: MountChoice = match &self.mount {
+            Some(m) => m.parse().map_err(|e| anyhow::anyhow!("--mount: {e}"))?,
+            None => MountChoice::default(),
+        };
+        if self.gps_csv.is_some() && self.map.is_none() {
             anyhow::bail!(
-                "--gps joins a second CSV to a mapped CSV: give the column map with --map"
+                "--gps-csv joins a second CSV to a mapped CSV: give the column map with --map"
             );
         }
         Ok(ImportOptions {
@@ -126,7 +126,7 @@ impl SourceArgs {
             },
             mount,
             map: self.map.clone(),
-            gps: self.gps.clone(),
+            gps: self.gps_csv.clone(),
             attitude: (self.attitude != "auto").then(|| self.attitude.clone()),
         })
     }
@@ -182,12 +182,15 @@ pub struct FitArgs {
     /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
-    /// Write the reconstructed path here (CSV: t_s,lat_deg,lon_deg,alt_m,...).
+    /// Write the reconstructed path here, in the format its extension names:
+    /// `.csv` (t_s,lat_deg,lon_deg,alt_m,...; - for standard output), `.gpx`,
+    /// or `.tum` (a TUM trajectory for evo, in Unix time when the source has it).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Write the fit report here (JSON).
-    #[arg(long)]
-    pub report: Option<PathBuf>,
+    /// Write the fit report here (JSON; - for standard output). `--report`
+    /// is an older name for it.
+    #[arg(long, alias = "report")]
+    pub json: Option<PathBuf>,
     /// A better track of the same drive to measure the path against (RTK, an
     /// INS): `t_s,lat_deg,lon_deg[,alt_m]` CSV on the ride's clock. In a batch
     /// a file name that does not exist is looked up beside each ride
@@ -203,6 +206,12 @@ pub struct FitArgs {
 }
 
 #[derive(Debug, Args)]
+#[command(mut_arg("gps_noise", |a| a.help(
+    "GPS noise: `auto` fits the base model with the noise estimated from the ride, then \
+     ranks every candidate under independent 3 m fixes (the noise the significance rule \
+     was calibrated under); `SIGMA`, `SIGMA,TAU` or `SIGMA,TAU,JITTER` (m, s, m) are used \
+     for both"
+)))]
 pub struct DiagnoseArgs {
     /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), or a CSV with --map.
     pub ride: PathBuf,
@@ -466,14 +475,14 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     let settings = args.settings.settings()?;
     // The outputs' names are checked before the fit, not after minutes of it.
     let path_format = args.out.as_deref().map(PathFormat::of).transpose()?;
-    if let Some(rep) = &args.report {
+    if let Some(rep) = &args.json {
         check_report_name(rep)?;
     }
     let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(is_stdout);
-    if to_stdout(&args.out) && to_stdout(&args.report) {
-        anyhow::bail!("--out and --report cannot both go to standard output");
+    if to_stdout(&args.out) && to_stdout(&args.json) {
+        anyhow::bail!("--out and --json cannot both go to standard output");
     }
-    let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.report);
+    let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.json);
     let reference = args
         .reference
         .as_deref()
@@ -506,7 +515,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         b.finish_and_clear();
     }
     physical(&fit)?;
-    let uncertainty = (args.out.is_some() || args.report.is_some())
+    let uncertainty = (args.out.is_some() || args.json.is_some())
         .then(|| fit.model().uncertainty(fit.params()))
         .flatten();
     let elapsed = started.elapsed().as_secs_f64();
@@ -520,7 +529,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let (Some(out), Some(format)) = (&args.out, path_format) {
         write_path(out, format, ride, &fit, uncertainty.as_ref())?;
     }
-    if let Some(rep) = &args.report {
+    if let Some(rep) = &args.json {
         write_report(rep, ride, &report)?;
     }
     if !args.quiet {
@@ -553,6 +562,9 @@ fn write_path(
                 write_path_gpx(w, fit.model(), &trajectory)
             })
         }
+        PathFormat::Tum => write_atomically(out, Some(ride), |w| {
+            write_path_tum(w, fit.model(), fit.params())
+        }),
     }
     .context("the path could not be written")
 }
@@ -743,8 +755,8 @@ fn fit_one(
 /// fail are reported in the table and make the exit status 1, but never stop the others.
 fn fit_batch(args: &FitArgs) -> Result<()> {
     use rayon::prelude::*;
-    if args.out.is_some() || args.report.is_some() {
-        anyhow::bail!("with several rides use --out-dir instead of --out/--report");
+    if args.out.is_some() || args.json.is_some() {
+        anyhow::bail!("with several rides use --out-dir instead of --out/--json");
     }
     // Without --out-dir a batch writes no files: a folder of rides must not
     // scatter outputs into the working directory.
@@ -896,8 +908,8 @@ fn summary_text(r: &FitReport, verbose: bool) -> String {
     _ = writeln!(out, "cost      {:.4}", r.stats.cost);
     _ = writeln!(
         out,
-        "rms       horizontal {:.3} m",
-        r.stats.rms_horizontal_m
+        "rms       path to the fixes {:.3} m horizontal (under {})",
+        r.stats.rms_horizontal_m, r.gps_noise
     );
     if let Some(v) = r.stats.rms_gps_up_m {
         _ = writeln!(out, "          GPS altitude {v:.3} m");
@@ -913,7 +925,7 @@ fn summary_text(r: &FitReport, verbose: bool) -> String {
     for (effect, values) in &r.parameters {
         if effect == "gyro_bias_segments" {
             let n = values.len() / 3;
-            _ = writeln!(out, "{effect}: {n} segments (see --report)");
+            _ = writeln!(out, "{effect}: {n} segments (see --json)");
             continue;
         }
         let list: Vec<String> = values
@@ -1126,6 +1138,11 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
         } else {
             String::new()
         }
+    );
+    _ = writeln!(
+        out,
+        "          ranked under {}: the noise as set, not estimated from the ride",
+        d.gps_noise
     );
     _ = writeln!(
         out,

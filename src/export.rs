@@ -122,10 +122,12 @@ pub enum PathFormat {
     Csv,
     /// A GPX 1.1 track (see [`write_path_gpx`]).
     Gpx,
+    /// A TUM trajectory for evo (see [`write_path_tum`]).
+    Tum,
 }
 
 impl PathFormat {
-    pub const CHOICES: &str = ".csv (or - for standard output), .gpx";
+    pub const CHOICES: &str = ".csv (or - for standard output), .gpx, .tum (for evo)";
 
     /// The format `path` asks for: `-` and special files get CSV, `.csv` and
     /// `.gpx` their own; anything else is an error naming the choices, since
@@ -137,6 +139,7 @@ impl PathFormat {
         match extension(path).as_deref() {
             Some("csv") => Ok(Self::Csv),
             Some("gpx") => Ok(Self::Gpx),
+            Some("tum") => Ok(Self::Tum),
             _ => Err(ExportError::UnknownFormat {
                 path: path.display().to_string(),
                 what: "path",
@@ -191,9 +194,44 @@ pub fn write_json(w: &mut dyn Write, content: &impl serde::Serialize) -> std::io
     writeln!(w)
 }
 
+/// The `#` lines that open a path file: what the columns are measured
+/// from, so that the path lines up with the user's other tools without
+/// gyropath: the source, the Unix time of `t_s = 0` when the source knows it
+/// (a bag's first message), the local frame's origin and the heading's
+/// convention. The ride-log and reference readers, pandas (`comment="#"`)
+/// and evo skip them.
+fn write_path_header(out: &mut dyn Write, sig: &crate::signals::Signals) -> std::io::Result<()> {
+    let origin = sig.frame.origin();
+    writeln!(out, "# gyropath path {}", env!("CARGO_PKG_VERSION"))?;
+    writeln!(out, "# source: {}", sig.source.replace(['\n', '\r'], " "))?;
+    match sig.t0_unix_s {
+        Some(t0) => writeln!(
+            out,
+            "# t0_unix_s: {t0:.9}\n# time: t_s is seconds since t0_unix_s (the source's clock)"
+        )?,
+        None => writeln!(
+            out,
+            "# time: t_s is the ride log's own clock (the log gives no absolute time)"
+        )?,
+    }
+    writeln!(
+        out,
+        "# origin_lat_deg: {:.9}\n# origin_lon_deg: {:.9}\n# origin_alt_m: {:.3}",
+        origin.lat_deg, origin.lon_deg, origin.alt_m
+    )?;
+    writeln!(
+        out,
+        "# frame: east, north, up in metres from the origin, in the plane tangent to the WGS84 ellipsoid there"
+    )?;
+    writeln!(
+        out,
+        "# heading: of the sensor's forward (x) axis, degrees clockwise from true north, 0-360"
+    )
+}
+
 /// Write `t_s,lat_deg,lon_deg,alt_m` (then east, north, up in metres and the
 /// compass heading, and with `sigma` the path's 1-sigma east, north and up)
-/// for every row of the log.
+/// for every row of the log, after the header of [`write_path_header`].
 pub fn write_path_csv(
     out: &mut dyn Write,
     model: &Model,
@@ -201,6 +239,7 @@ pub fn write_path_csv(
     sigma: Option<&Uncertainty>,
 ) -> std::io::Result<()> {
     let sig = &model.signals;
+    write_path_header(out, sig)?;
     writeln!(
         out,
         "t_s,lat_deg,lon_deg,alt_m,east_m,north_m,up_m,heading_deg{}",
@@ -237,6 +276,40 @@ pub fn write_path_csv(
             }
             None => writeln!(out),
         });
+    });
+    result
+}
+
+/// Write the path as a TUM trajectory, what evo and the SLAM benchmarks read:
+/// one line `t x y z qx qy qz qw` per row, space separated, after the header
+/// of [`write_path_header`] (`#` lines, which evo skips). `t` is Unix time
+/// when the source knows it (`t0_unix_s + t_s`), so the path lines up with
+/// other tools' trajectories by time; else the log's own clock. `x y z` are
+/// east, north, up (m) from the frame's origin; `q` turns the sensor frame
+/// (x forward, y left, z up) into that local frame, so `q * (1, 0, 0)` is the
+/// forward direction.
+pub fn write_path_tum(out: &mut dyn Write, model: &Model, theta: &[f64]) -> std::io::Result<()> {
+    let sig = &model.signals;
+    write_path_header(out, sig)?;
+    writeln!(out, "# timestamp tx ty tz qx qy qz qw")?;
+    let t0 = sig.t0_unix_s.unwrap_or(0.0);
+    let mut result = Ok(());
+    model.for_each_pose(theta, |j, q, p| {
+        if result.is_err() {
+            return;
+        }
+        result = writeln!(
+            out,
+            "{:.6} {:.4} {:.4} {:.4} {:.9} {:.9} {:.9} {:.9}",
+            t0 + sig.t[j],
+            p.x,
+            p.y,
+            p.z,
+            q.i,
+            q.j,
+            q.k,
+            q.w
+        );
     });
     result
 }
@@ -316,7 +389,7 @@ impl ParamValue {
     }
 }
 
-/// The fit report written by `gyropath fit --report`.
+/// The fit report written by `gyropath fit --json`.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FitReport {
     pub source: String,
@@ -345,6 +418,8 @@ pub struct FitReport {
     /// The jitter on top of a correlated error (m; see `model::noise`).
     #[serde(default)]
     pub gps_white_m: f64,
+    /// The GPS error law the fit (and its `stats`) is under, in words.
+    pub gps_noise: String,
     pub bias_walk: Option<f64>,
     /// Parameters per effect id.
     pub parameters: BTreeMap<String, Vec<ParamValue>>,
@@ -459,6 +534,7 @@ impl FitReport {
             gps_tau_s: model.spec.gps_tau_s,
             gps_tau_vertical_s: model.spec.gps_tau_vertical_s,
             gps_white_m: model.spec.gps_white_m,
+            gps_noise: model.spec.gps_noise_text(),
             bias_walk: model.spec.bias_walk_dps_sqrt_s,
             parameters,
             warnings: sig.warnings.clone(),

@@ -67,6 +67,10 @@ pub struct Signals {
     /// Whether the attitude is modelled in 3D or about the vertical only, and why.
     pub attitude: Attitude,
     pub warnings: Vec<String>,
+    /// The Unix time (s) of `t = 0` when the source knows it (a bag's first
+    /// message, a log's `# t0_unix_s:` line): the path's outputs carry it so
+    /// that they line up with the user's other tools.
+    pub t0_unix_s: Option<f64>,
 }
 
 /// How the attitude is modelled: the choice and the reason for it.
@@ -272,6 +276,17 @@ impl Signals {
         }
 
         let (distance, odometer) = odometer_distance(log)?;
+        let t0_unix_s =
+            match log.metadata.get("t0_unix_s").map(|v| v.trim()) {
+                None => None,
+                Some(v) => Some(v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(
+                    || {
+                        unusable(format!(
+                            "metadata t0_unix_s: '{v}' is not a time in seconds since 1970"
+                        ))
+                    },
+                )?),
+            };
 
         let first = log.fix.iter().position(Option::is_some).ok_or_else(|| {
             unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into())
@@ -341,6 +356,7 @@ impl Signals {
             odometer,
             attitude,
             warnings,
+            t0_unix_s,
         })
     }
 

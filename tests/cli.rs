@@ -42,7 +42,7 @@ fn simulate_then_fit_writes_path_and_report() {
         s(&ride),
         "--out",
         s(&path),
-        "--report",
+        "--json",
         s(&report),
         "--segment-s",
         "10",
@@ -54,7 +54,7 @@ fn simulate_then_fit_writes_path_and_report() {
         String::from_utf8_lossy(&out.stderr)
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("rms       horizontal"), "{stdout}");
+    assert!(stdout.contains("rms       path to the fixes"), "{stdout}");
     // With --verbose: plain progress lines when stderr is not a terminal,
     // and the segment lengths' -2 ln L.
     assert!(String::from_utf8_lossy(&out.stderr).contains("step 2 lm"));
@@ -67,7 +67,9 @@ fn simulate_then_fit_writes_path_and_report() {
         .count()
         - 1;
     let text = std::fs::read_to_string(&path).unwrap();
-    let mut lines = text.lines();
+    // The `#` lines say what the columns are measured from.
+    assert!(text.starts_with("# gyropath path"), "{text:.300}");
+    let mut lines = text.lines().filter(|l| !l.starts_with('#'));
     let header = lines.next().unwrap();
     assert!(header.starts_with("t_s,lat_deg,lon_deg,alt_m"));
     // The path's 1-sigma per row: positive, finite, metres.
@@ -75,7 +77,12 @@ fn simulate_then_fit_writes_path_and_report() {
         header.ends_with(",sigma_east_m,sigma_north_m,sigma_up_m"),
         "{header}"
     );
-    for line in text.lines().skip(1).step_by(997) {
+    for line in text
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .step_by(997)
+    {
         for v in line.split(',').skip(8) {
             let v: f64 = v.parse().unwrap();
             assert!(v.is_finite() && v > 0.0 && v < 50.0, "{line}");
@@ -290,9 +297,9 @@ const HUSKY: &str = concat!(
     "/../shared/real/robot_localization-test1"
 );
 
-/// `gyropath fit SOURCE --report R` with no other flag: the report's odometer gain and RMS.
+/// `gyropath fit SOURCE --json R` with no other flag: the report's odometer gain and RMS.
 fn fit_source(source: &str, report: &Path) -> (f64, f64) {
-    let out = gyropath(&["fit", source, "--quiet", "--report", s(report)]);
+    let out = gyropath(&["fit", source, "--quiet", "--json", s(report)]);
     assert!(
         out.status.success(),
         "{source}: {}",
@@ -514,7 +521,7 @@ fn listed_effects_add_to_the_papers_model_and_a_path_that_misses_the_fixes_is_a_
         "--effects",
         "gps_lag",
         "--quiet",
-        "--report",
+        "--json",
         s(&report),
     ]);
     assert!(
@@ -615,11 +622,11 @@ fn dash_is_standard_output_the_format_follows_the_extension_and_devices_stay_dev
             .unwrap()
     };
     // The report on standard output (JSON alone there), the summary on standard error.
-    let out = run(&["fit", "ride.csv", "--report", "-"]);
+    let out = run(&["fit", "ride.csv", "--json", "-"]);
     assert!(out.status.success());
     let r: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
     assert!(r["stats"]["rms_horizontal_m"].as_f64().is_some());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("rms       horizontal"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("rms       path to the fixes"));
     assert!(!dir.path().join("-").exists(), "a file named - was written");
 
     // .gpx is GPX; an unknown extension fails before the fit, naming the choices.
@@ -717,15 +724,7 @@ fn check_fails_on_a_problem_the_default_reading_leaves_and_json_says_what_made_i
 
     // Every JSON output carries the tool's and the schema's versions, and
     // a setting with no limit says null, not "None".
-    let fit = gyropath(&[
-        "fit",
-        s(&ride),
-        "--mount",
-        "auto",
-        "--quiet",
-        "--report",
-        "-",
-    ]);
+    let fit = gyropath(&["fit", s(&ride), "--mount", "auto", "--quiet", "--json", "-"]);
     assert!(fit.status.success());
     let r: serde_json::Value = serde_json::from_slice(&fit.stdout).unwrap();
     assert_eq!(r["tool"], "gyropath");
@@ -752,7 +751,7 @@ fn the_summary_gives_the_bias_the_sensor_had_not_only_its_constant_part() {
     );
     let dir = tempfile::tempdir().unwrap();
     let report = dir.path().join("r.json");
-    let out = gyropath(&["fit", berlin, "--report", s(&report)]);
+    let out = gyropath(&["fit", berlin, "--json", s(&report)]);
     assert!(out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.contains("bias      total z "), "{text}");
@@ -820,4 +819,156 @@ fn every_subcommands_help_has_an_example() {
             "{sub} --help: {text}"
         );
     }
+}
+
+#[test]
+fn every_fit_error_names_the_gps_noise_law_it_is_measured_under() {
+    let comma = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    );
+    // fit: the RMS under the noise it estimated from the ride.
+    let out = gyropath(&["fit", comma, "--json", "-"]);
+    assert!(out.status.success());
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let law = report["gps_noise"].as_str().unwrap().to_string();
+    assert!(law.starts_with("a GPS error wandering "), "{law}");
+    let summary = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        summary.contains(&format!("rms       path to the fixes")) && summary.contains(&law),
+        "{summary}"
+    );
+    // diagnose: its errors under the noise as set, and it says which.
+    let out = gyropath(&["diagnose", comma, "--quiet", "--json", "-"]);
+    let d: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(d["gps_noise"], "independent GPS fixes of 3.0 m");
+    let out = gyropath(&["diagnose", comma, "--quiet"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("ranked under independent GPS fixes of 3.0 m: the noise as set"),
+        "{text}"
+    );
+    // Its --help says what `auto` means for the ranking.
+    let help = String::from_utf8_lossy(&gyropath(&["diagnose", "--help"]).stdout).to_string();
+    assert!(
+        help.contains("ranks every candidate under independent 3 m fixes"),
+        "{help}"
+    );
+}
+
+#[test]
+fn one_flag_name_per_idea_across_subcommands() {
+    for sub in ["fit", "diagnose", "check", "import", "open"] {
+        let help = String::from_utf8_lossy(&gyropath(&[sub, "--help"]).stdout).to_string();
+        // No placeholder default on the mounting.
+        assert!(!help.contains("[default: default]"), "{sub}: {help}");
+        // A second CSV of fixes is --gps-csv; --gps is simulate's GPS environment only.
+        assert!(help.contains("--gps-csv"), "{sub}: {help}");
+        assert!(!help.contains("--gps <"), "{sub}: {help}");
+        if sub != "import" && sub != "open" {
+            assert!(help.contains("--json <"), "{sub}: {help}");
+            assert!(!help.contains("--report <"), "{sub}: {help}");
+        }
+    }
+    let help = String::from_utf8_lossy(&gyropath(&["simulate", "--help"]).stdout).to_string();
+    assert!(help.contains("--gps <GPS>"), "{help}");
+    // The old name of fit's report still works.
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "52", "", "120");
+    let report = dir.path().join("r.json");
+    let out = gyropath(&["fit", s(&ride), "--quiet", "--report", s(&report)]);
+    assert!(out.status.success());
+    assert!(report.exists());
+}
+
+/// The path's fields of one TUM line: t x y z qx qy qz qw.
+fn tum_line(line: &str) -> [f64; 8] {
+    let v: Vec<f64> = line.split(' ').map(|x| x.parse().unwrap()).collect();
+    v.try_into().expect("8 fields")
+}
+
+#[test]
+fn the_path_keeps_the_sources_time_and_frame_and_is_written_as_tum_for_evo() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = format!("{HUSKY}/test1.bag");
+    let (csv, tum) = (dir.path().join("p.csv"), dir.path().join("p.tum"));
+    for out in [&csv, &tum] {
+        let run = gyropath(&["fit", &bag, "--quiet", "--out", s(out)]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+    }
+    let csv = std::fs::read_to_string(&csv).unwrap();
+    let tum = std::fs::read_to_string(&tum).unwrap();
+    // Both headers: the bag's start in Unix time, the frame's origin, the heading's convention.
+    for text in [&csv, &tum] {
+        assert!(text.contains("# t0_unix_s: 1432235498.05"), "{text:.600}");
+        assert!(text.contains("# origin_lat_deg: 42.37"), "{text:.600}");
+        assert!(text.contains(
+            "# heading: of the sensor's forward (x) axis, degrees clockwise from true north"
+        ));
+    }
+    let rows: Vec<&str> = csv
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .skip(1)
+        .collect();
+    let poses: Vec<[f64; 8]> = tum
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(tum_line)
+        .collect();
+    assert_eq!(rows.len(), poses.len());
+    for (row, pose) in rows.iter().zip(&poses).step_by(991) {
+        let f: Vec<f64> = row.split(',').map(|x| x.parse().unwrap()).collect();
+        // Unix time = t0 + t_s; x, y, z = east, north, up.
+        assert!(
+            (pose[0] - (1432235498.055589676 + f[0])).abs() < 1e-5,
+            "{row} / {pose:?}"
+        );
+        for a in 0..3 {
+            assert!((pose[1 + a] - f[4 + a]).abs() < 2e-3, "{row} / {pose:?}");
+        }
+        // A unit quaternion whose forward axis has the CSV's compass heading.
+        let [_, _, _, _, x, y, z, w] = *pose;
+        assert!(((x * x + y * y + z * z + w * w).sqrt() - 1.0).abs() < 1e-6);
+        let east = 1.0 - 2.0 * (y * y + z * z);
+        let north = 2.0 * (x * y + w * z);
+        let heading = east.atan2(north).to_degrees().rem_euclid(360.0);
+        let diff = (heading - f[7] + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(diff.abs() < 0.02, "{heading} vs {}", f[7]);
+    }
+    // A log without an absolute time keeps its own clock, and says so.
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "53", "", "120");
+    let tum = dir.path().join("r.tum");
+    assert!(
+        gyropath(&["fit", s(&ride), "--quiet", "--out", s(&tum)])
+            .status
+            .success()
+    );
+    let text = std::fs::read_to_string(&tum).unwrap();
+    assert!(text.contains("# time: t_s is the ride log's own clock"));
+    let first = text.lines().find(|l| !l.starts_with('#')).unwrap();
+    assert_eq!(tum_line(first)[0], 0.0);
+}
+
+#[test]
+fn a_bad_absolute_time_in_a_log_is_an_error_naming_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "54", "", "60");
+    let text = std::fs::read_to_string(&ride).unwrap();
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(&bad, format!("# t0_unix_s: yesterday\n{text}")).unwrap();
+    let out = gyropath(&["fit", s(&bad)]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        err.contains("bad.csv") && err.contains("t0_unix_s") && err.contains("yesterday"),
+        "{err}"
+    );
 }

@@ -41,8 +41,9 @@ impl GyropathApp {
             n => format!(" ({n} jumps out)"),
         };
         ui.label(format!(
-            "{} refitted with the GPS noise as set: fit {:.3} m, held-out {:.3} m{jumps}",
+            "{} refitted under the noise as set ({}): fit {:.3} m, held-out {:.3} m{jumps}",
             short_model(&d.model.join(", ")),
+            d.gps_noise,
             d.fit_rms_m,
             d.heldout_rms_m
         ))

@@ -48,7 +48,14 @@ impl GyropathApp {
                 ui.label(format!("{:.6e}", s.stats.cost));
                 ui.end_row();
                 ui.label("GPS RMS");
-                ui.label(format!("{:.3} m", s.stats.rms_horizontal_m));
+                ui.label(format!("{:.3} m", s.stats.rms_horizontal_m))
+                    .on_hover_text(format!(
+                        "The path's RMS distance from the fixes, under {}",
+                        s.gps_noise
+                    ));
+                ui.end_row();
+                ui.label("under");
+                ui.label(&s.gps_noise);
                 ui.end_row();
                 ui.label("along / cross");
                 ui.label(format!(

@@ -49,7 +49,11 @@ impl GyropathApp {
                             ui.label(format!("{:.1} s", row.segment_s));
                             ui.label(format!("{}", row.params));
                             ui.label(format!("{}", row.iterations));
-                            ui.label(format!("{:.3} m", row.fit_rms_m));
+                            ui.label(format!("{:.3} m", row.fit_rms_m))
+                                .on_hover_text(format!(
+                                    "Path to the fixes, under {} (this fit's own noise; Diagnose ranks under the noise as set)",
+                                    row.gps_noise
+                                ));
                             match row.held_out.map(|h| (h.rms_m, h.jumps_left_out)) {
                                 Some((h, 0)) => ui.label(format!("{h:.3} m")),
                                 Some((h, jumps)) => ui

@@ -58,6 +58,7 @@ impl GyropathApp {
                 for (label, kind) in [
                     ("Export path (CSV)...", ExportKind::PathCsv),
                     ("Export path (GPX)...", ExportKind::PathGpx),
+                    ("Export path (TUM, for evo)...", ExportKind::PathTum),
                     ("Export fit report (JSON)...", ExportKind::ReportJson),
                 ] {
                     if ui.add_enabled(fitted, egui::Button::new(label)).clicked() {

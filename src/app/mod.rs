@@ -106,6 +106,8 @@ pub struct HistoryRow {
     pub segment_s: f64,
     pub params: usize,
     pub fit_rms_m: f64,
+    /// The GPS error law both RMS are measured under, in words.
+    pub gps_noise: String,
     /// Held-out error over the fixes that are not GPS jumps (and how many
     /// were left out), filled in by a background validation of this fit as
     /// it is (its own noise settings).
@@ -318,6 +320,7 @@ impl GyropathApp {
             segment_s: self.settings.fit.model.segment_s,
             params: s.n_params,
             fit_rms_m: s.stats.rms_horizontal_m,
+            gps_noise: s.gps_noise.clone(),
             held_out: None,
             iterations: s.history.len(),
             reference_rms_m: s.reference.as_ref().map(|c| c.horizontal.rms_m),
@@ -379,6 +382,7 @@ impl GyropathApp {
                 let (filter, ext) = match kind {
                     ExportKind::PathCsv => ("path CSV", "csv"),
                     ExportKind::PathGpx => ("GPX track", "gpx"),
+                    ExportKind::PathTum => ("TUM trajectory", "tum"),
                     ExportKind::ReportJson => ("fit report", "json"),
                 };
                 let stem = self.export_stem();

@@ -16,7 +16,9 @@ use crate::diagnosis::{
     Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
     fix_residuals, held_out_rms, segment_biases,
 };
-use crate::export::{FitReport, write_atomically, write_json, write_path_csv, write_path_gpx};
+use crate::export::{
+    FitReport, write_atomically, write_json, write_path_csv, write_path_gpx, write_path_tum,
+};
 use crate::import::ReferenceTrack;
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
 use crate::model::{Model, PathAt};
@@ -56,6 +58,8 @@ impl RideSource {
 pub enum ExportKind {
     PathCsv,
     PathGpx,
+    /// A TUM trajectory (for evo).
+    PathTum,
     ReportJson,
 }
 
@@ -153,6 +157,8 @@ pub struct Snapshot {
     pub violations: Vec<String>,
     /// The noise settings estimated from the ride, once the fit has them.
     pub noise: Option<crate::optimisation::NoiseEstimate>,
+    /// The GPS error law the fit's errors are measured under, in words.
+    pub gps_noise: String,
     /// How sure the finished fit is (computed once the fit is done: 40
     /// posterior sweeps of the ride are too many for every iteration).
     pub sigma: Option<SigmaView>,
@@ -604,6 +610,9 @@ impl Worker {
                 let traj = fit.trajectory();
                 write_atomically(path, protect, |w| write_path_gpx(w, model, &traj))
             }
+            ExportKind::PathTum => {
+                write_atomically(path, protect, |w| write_path_tum(w, model, fit.params()))
+            }
             ExportKind::ReportJson => {
                 let report = FitReport::new(fit, 0.0);
                 write_atomically(path, protect, |w| write_json(w, &report))
@@ -734,6 +743,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
             .map(ToString::to_string)
             .collect(),
         noise: fit.noise().cloned(),
+        gps_noise: model.spec.gps_noise_text(),
         sigma: u.map(|u| SigmaView {
             path: u.path.iter().map(|v| [v[0], v[1], v[3]]).collect(),
             segments: segment_sigmas(model, u, segments_len),

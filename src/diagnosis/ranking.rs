@@ -112,6 +112,10 @@ pub struct Diagnosis {
     pub model: Vec<String>,
     pub fit_rms_m: f64,
     pub heldout_rms_m: f64,
+    /// The GPS error law both errors (and the whole ranking) are measured
+    /// under: the noise as set, which can differ from what `fit` estimates
+    /// on the same ride ([`crate::model::ModelSpec::gps_noise_text`]).
+    pub gps_noise: String,
     pub residual_rms: ResidualRms,
     pub folds: Folds,
     /// Fixes left out of the held-out comparison as GPS jumps.
@@ -275,6 +279,7 @@ pub fn diagnose_fitted_against(
         model: present,
         fit_rms_m: fit_rms,
         heldout_rms_m: base_rms.rms_m,
+        gps_noise: model.spec.gps_noise_text(),
         residual_rms: ResidualRms::of(&residuals),
         folds: *folds,
         excluded_fixes: base_rms.jumps_left_out,

@@ -127,6 +127,29 @@ impl ModelSpec {
         let tau = self.gps_tau_s;
         [tau, tau, tau.and(self.gps_tau_vertical_s.or(tau))]
     }
+
+    /// The GPS error law these settings assume, in words, to label every
+    /// misfit measured under it ("independent GPS fixes of 3.0 m", "a GPS
+    /// error wandering 0.55 m over 41 s + 0.11 m jitter"): `fit` estimates the law from the
+    /// ride while `diagnose` ranks under the law as set, so the same ride
+    /// has two fit errors and each must say which it is.
+    pub fn gps_noise_text(&self) -> String {
+        let robust = if self.effects.iter().any(|e| e == "gps_outliers") {
+            ", outliers down-weighted"
+        } else {
+            ""
+        };
+        match self.gps_tau_s {
+            Some(tau) => format!(
+                "a GPS error wandering {:.2} m over {tau:.0} s + {:.2} m jitter{robust}",
+                self.sigma_horizontal_m, self.gps_white_m
+            ),
+            None => format!(
+                "independent GPS fixes of {:.1} m{robust}",
+                self.sigma_horizontal_m
+            ),
+        }
+    }
 }
 
 /// Default random-walk density of the segment-bias prior (deg/s/sqrt(s)):

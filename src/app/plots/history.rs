@@ -99,6 +99,7 @@ mod tests {
             segment_s: 5.0,
             params: 3,
             fit_rms_m: fit,
+            gps_noise: String::new(),
             held_out: h.map(|rms_m| HeldOutRms {
                 rms_m,
                 jumps_left_out: 0,
