@@ -1,5 +1,5 @@
 //! Speed of the core on simulated 100 Hz rides with 1 Hz GPS and 5 s segments.
-//! `cargo bench --bench core`; numbers are in the README.
+//! `cargo bench --bench core`; numbers are in docs/speed.md.
 
 use std::hint::black_box;
 use std::sync::Arc;

@@ -95,7 +95,7 @@ pub struct SourceArgs {
     /// mapping such as "x=-z,y=-x,z=y". Not given: `auto` for bags, `none` for CSV.
     #[arg(long)]
     pub mount: Option<String>,
-    /// TOML column map: read the input as a mapped CSV (see README).
+    /// TOML column map: read the input as a mapped CSV (see docs/real-logs.md).
     #[arg(long)]
     pub map: Option<PathBuf>,
     /// Second CSV with the GPS fixes of a mapped CSV, joined by time.
@@ -382,8 +382,14 @@ impl SettingsArgs {
                 walk: self.bias_walk.trim() == "auto",
             },
             model: ModelSpec {
+                // The paper's model, then what the user listed (once each:
+                // `--effects paper,gps_lag` says the same as `gps_lag`).
                 effects: std::iter::once("paper".to_string())
-                    .chain(split_list(&self.effects))
+                    .chain(
+                        split_list(&self.effects)
+                            .into_iter()
+                            .filter(|e| e != "paper"),
+                    )
                     .collect(),
                 segment_s: self.segment_s,
                 bias_walk_dps_sqrt_s: walk,

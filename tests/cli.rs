@@ -835,7 +835,7 @@ fn every_fit_error_names_the_gps_noise_law_it_is_measured_under() {
     assert!(law.starts_with("a GPS error wandering "), "{law}");
     let summary = String::from_utf8_lossy(&out.stderr);
     assert!(
-        summary.contains(&format!("rms       path to the fixes")) && summary.contains(&law),
+        summary.contains("rms       path to the fixes") && summary.contains(&law),
         "{summary}"
     );
     // diagnose: its errors under the noise as set, and it says which.
@@ -926,7 +926,7 @@ fn the_path_keeps_the_sources_time_and_frame_and_is_written_as_tum_for_evo() {
         let f: Vec<f64> = row.split(',').map(|x| x.parse().unwrap()).collect();
         // Unix time = t0 + t_s; x, y, z = east, north, up.
         assert!(
-            (pose[0] - (1432235498.055589676 + f[0])).abs() < 1e-5,
+            (pose[0] - (1_432_235_498.055_589_7 + f[0])).abs() < 1e-5,
             "{row} / {pose:?}"
         );
         for a in 0..3 {

@@ -142,7 +142,7 @@ fn gps_lag_is_found_and_its_lag_recovered() {
 
 #[test]
 fn gyro_scale_is_found_and_the_yaw_factor_recovered() {
-    // Within 20 % on nine of ten seeds (README). Seed 44 is the exception,
+    // Within 20 % on nine of ten seeds (docs/diagnosis.md). Seed 44 is the exception,
     // kept here because it is: its bias walk and GPS noise look like a
     // +0.8 % yaw scale error even with the true one removed, so the fit
     // lands 21 % short; its reported sigma (jackknife) covers that.

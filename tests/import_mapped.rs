@@ -1,4 +1,4 @@
-//! Mapped CSVs (the README's two examples), rides written in the wrong axes
+//! Mapped CSVs (docs/real-logs.md's two examples), rides written in the wrong axes
 //! or units (the checks name the mapping that undoes them), and per-fix GPS
 //! accuracy (a stretch of poor fixes is weighted down).
 

@@ -243,7 +243,7 @@ fn the_noise_search_keeps_what_is_set_by_hand() {
 /// have a median |z| near a normal's 0.67 and few beyond 3. Measured: median
 /// 0.96, one ride at 6.0 (without the residual-correlation widening the
 /// median was 1.34 and two rides were beyond 4): still somewhat overconfident,
-/// see README "How sure".
+/// see docs/uncertainty.md.
 #[test]
 fn the_gain_sigma_is_calibrated_against_the_truth() {
     let mut z = Vec::new();
@@ -274,7 +274,7 @@ fn the_gain_sigma_is_calibrated_against_the_truth() {
 /// (sampled every second).
 /// Under the noise estimated from the ride they hold it less often (78.7 %
 /// on these rides, 76.4 % on 12; see `examples/calibration.rs` and the
-/// README): the estimated wander comes out about a fifth small.
+/// docs/gps-noise.md): the estimated wander comes out about a fifth small.
 #[test]
 fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
     let mut settings = FitSettings {

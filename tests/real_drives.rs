@@ -192,7 +192,7 @@ fn real_drives_against_their_references() {
             }
             // Berlin: city fixes 20 m off. Guards of today's result (the
             // issue's targets, 0.35 and 0.25 x the fixes, are not met yet:
-            // see README), and no odometer warning from a noisy GPS track.
+            // see docs/real-drives.md), and no odometer warning from a noisy GPS track.
             "smartloc-berlin-potsdamer-platz" => {
                 assert!(
                     default.horizontal.rms_m < 0.5 * fixes.rms_m,

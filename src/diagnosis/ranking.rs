@@ -38,7 +38,7 @@
 //! effect (GPS error correlated over a minute) nothing passed, and on 35
 //! rides with one the rule decided as it did on the per-block squared
 //! error, the per-block median error and this score alike
-//! (`examples/significance.rs`, README).
+//! (`examples/significance.rs`, docs/diagnosis.md).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
