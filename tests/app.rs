@@ -69,8 +69,18 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .stats
         .rms_horizontal_m;
     assert!(rms < 3.0, "GPS RMS {rms}");
-    // The fit panel and the model history's row both show the fit RMS.
+    // The fit panel and the model history's row both show the fit RMS, and
+    // the panel says which GPS error law it is measured under.
     assert_eq!(h.get_all_by_label(&format!("{rms:.3} m")).count(), 2);
+    let law = h
+        .state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .gps_noise
+        .clone();
+    assert!(law.contains("GPS"), "{law}");
+    h.get_by_label(&law);
     // The finished fit says how sure it is: ellipses along the path, a band on
     // the biases, every parameter with its sigma.
     let snap = h.state().snapshot.as_ref().expect("snapshot");
