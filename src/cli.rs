@@ -8,7 +8,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use gyropath::diagnosis::{Diagnosis, Folds, limits, reference};
+use gyropath::diagnosis::{Diagnosis, Folds, reference};
 use gyropath::export::{
     FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
     write_path_csv, write_path_gpx, write_path_tum,
@@ -16,6 +16,7 @@ use gyropath::export::{
 use gyropath::import::{
     self, ImportOptions, Imported, Level, MountChoice, ReferenceTrack, TopicChoice,
 };
+use gyropath::limits;
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
 use gyropath::optimisation::{
     AutoNoise, FitSettings, IterationReport, Method, Phase, Reconstruction,
@@ -582,7 +583,7 @@ fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Resu
 }
 
 /// A fit beyond the physical limits is a failure, with its likely cause,
-/// never a result (see `gyropath::diagnosis::limits`).
+/// never a result (see `gyropath::limits`).
 fn physical(fit: &Reconstruction) -> Result<()> {
     let broken = limits::check(fit.model(), fit.params());
     if broken.is_empty() {

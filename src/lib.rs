@@ -21,13 +21,17 @@
 
 #[cfg(feature = "app")]
 pub mod app;
+pub mod contract;
 pub mod diagnosis;
 pub mod effects;
 pub mod export;
 pub mod geodesy;
 pub mod import;
+pub mod limits;
 pub mod model;
 pub mod optimisation;
+pub mod ride;
+pub mod rotation;
 pub mod signals;
 pub mod simulation;
 pub mod statistics;

@@ -10,7 +10,7 @@ use nalgebra::Vector3;
 use thiserror::Error;
 
 use crate::geodesy::{Geodetic, LocalFrame};
-use crate::import::RideLog;
+use crate::ride::RideLog;
 
 /// Why a loaded log cannot be used for a reconstruction.
 #[derive(Debug, Error)]

@@ -445,7 +445,7 @@ fn the_husky_is_planar_physical_and_diagnose_finds_nothing_absurd() {
         if c["significant"] == true {
             for (name, e) in c["estimate"].as_object().unwrap() {
                 let v = e["value"].as_f64().unwrap().abs();
-                use gyropath::diagnosis::limits::{MAX_MOUNT_DEG, MAX_SCALE_PERCENT};
+                use gyropath::limits::{MAX_MOUNT_DEG, MAX_SCALE_PERCENT};
                 let limit = if name.starts_with("forward") {
                     MAX_MOUNT_DEG
                 } else if name.starts_with("scale") {

@@ -6,8 +6,8 @@
 
 use std::sync::Arc;
 
-use gyropath::diagnosis::limits;
 use gyropath::import::{self, MountChoice, SourceKind};
+use gyropath::limits;
 use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, SimulatedRide, Vehicle, simulate};

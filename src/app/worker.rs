@@ -153,7 +153,7 @@ pub struct Snapshot {
     pub params: Vec<(String, String, f64, String)>,
     pub n_params: usize,
     pub effects: Vec<String>,
-    /// Physical limits the current parameters break (see `diagnosis::limits`).
+    /// Physical limits the current parameters break (see `limits`).
     pub violations: Vec<String>,
     /// The noise settings estimated from the ride, once the fit has them.
     pub noise: Option<crate::optimisation::NoiseEstimate>,
@@ -738,7 +738,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
         params,
         n_params: model.n_params(),
         effects: model.effect_ids(),
-        violations: crate::diagnosis::limits::check_on(model, theta, &sparse)
+        violations: crate::limits::check_on(model, theta, &sparse)
             .iter()
             .map(ToString::to_string)
             .collect(),

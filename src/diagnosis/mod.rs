@@ -1,7 +1,7 @@
 //! Seeing where the model fails: residuals in the frame of travel, the fitted
 //! bias per segment, held-out validation and the ranking of missing effects.
 
-pub mod limits;
+pub mod absurd;
 pub mod ranking;
 pub mod reference;
 pub mod residuals;

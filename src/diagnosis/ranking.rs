@@ -49,8 +49,8 @@ use super::validation::{ErrorLaw, Folds, HeldOut, comparable_fixes, fix_errors, 
 use super::{ResidualRms, fix_residuals};
 use crate::effects::{self, Role};
 use crate::import::reference::ReferenceTrack;
+use crate::model::damped_solve;
 use crate::model::{Model, ModelSpec};
-use crate::optimisation::lm::damped_solve;
 use crate::optimisation::{FitError, FitSettings, Reconstruction};
 use crate::signals::Signals;
 
@@ -266,7 +266,7 @@ pub fn diagnose_fitted_against(
             .then(a.heldout_rms_m.total_cmp(&b.heldout_rms_m))
     });
     let residuals = fix_residuals(model, theta, &model.residual_path(theta));
-    let not_physical: Vec<String> = super::limits::check(model, theta)
+    let not_physical: Vec<String> = crate::limits::check(model, theta)
         .iter()
         .map(ToString::to_string)
         .collect();
@@ -373,7 +373,7 @@ fn candidate(
     let drop = 1.0 - heldout / base_rms;
     let e = fit.model().effect_index(id).map(|e| fit.model().range(e));
     let estimate = estimates(fit.model(), fit.params(), Some(id), &ho.fold_params);
-    let absurd = super::limits::absurd_estimate(id, &estimate.iter().collect::<Vec<_>>());
+    let absurd = super::absurd::absurd_estimate(id, &estimate.iter().collect::<Vec<_>>());
     // A physically absurd estimate is never a missing effect, however much it helps.
     let significant = significant(drop, t) && absurd.is_none();
     let explanation =

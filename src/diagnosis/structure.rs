@@ -38,23 +38,7 @@ pub struct Correlation {
     pub n: usize,
 }
 
-/// Pearson correlation of two equally long series (`None` if either is constant).
-pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
-    let n = x.len().min(y.len());
-    if n < 3 {
-        return None;
-    }
-    let mx = x[..n].iter().sum::<f64>() / n as f64;
-    let my = y[..n].iter().sum::<f64>() / n as f64;
-    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-    for i in 0..n {
-        let (a, b) = (x[i] - mx, y[i] - my);
-        sxy += a * b;
-        sxx += a * a;
-        syy += b * b;
-    }
-    (sxx > 0.0 && syy > 0.0).then(|| sxy / (sxx * syy).sqrt())
-}
+pub use crate::statistics::pearson;
 
 /// `x_{k+1} - x_k`.
 fn increments(x: &[f64]) -> Vec<f64> {

@@ -7,7 +7,7 @@
 //! `d target / d k = -(t - t_0) / 3600`. Only barometric rows are shifted.
 
 use super::{Columns, Effect, ParamInfo, TargetSite};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BaroDrift;

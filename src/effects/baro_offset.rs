@@ -5,7 +5,7 @@
 //! automatically whenever the log has a `baro_alt_m` column.
 
 use super::{Columns, Effect, ParamInfo, TargetSite};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct BaroOffset;

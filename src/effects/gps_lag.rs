@@ -9,7 +9,7 @@
 //! the path's velocity. Visible as an along-track residual that follows speed.
 
 use super::{Effect, ParamInfo};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GpsLag;

@@ -14,7 +14,7 @@
 //! in weighted units (2.385: 95 % efficiency on Gaussian noise).
 
 use super::{Effect, ParamInfo};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 use crate::signals::Signals;
 
 #[derive(Clone, Copy, Debug)]

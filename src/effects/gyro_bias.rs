@@ -16,7 +16,7 @@
 use nalgebra::Vector3;
 
 use super::{Effect, GyroPartials, ParamInfo, PriorRows, Role};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GyroBias {

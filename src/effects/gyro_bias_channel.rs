@@ -29,7 +29,7 @@ use nalgebra::Vector3;
 
 use super::gyro_bias::DEG_PER_RAD;
 use super::{Effect, GyroPartials, ParamInfo, PriorRows, Role};
-use crate::model::{ModelError, StartGuess};
+use crate::contract::{ModelError, StartGuess};
 use crate::signals::Signals;
 
 #[derive(Clone, Debug)]

@@ -18,7 +18,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::{Columns, Effect, GyroPartials, ParamInfo, PriorRows};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct GyroScale {

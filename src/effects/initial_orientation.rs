@@ -17,7 +17,7 @@
 use nalgebra::Vector3;
 
 use super::{Effect, ParamInfo, PriorRows};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct InitialOrientation {

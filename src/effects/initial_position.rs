@@ -6,7 +6,7 @@
 use nalgebra::Vector3;
 
 use super::{Effect, ParamInfo};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct InitialPosition;

@@ -21,7 +21,7 @@ use nalgebra::Vector3;
 
 use super::gyro_bias::DEG_PER_RAD;
 use super::{Columns, Effect, ParamInfo};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MountMisalignment;

@@ -7,10 +7,10 @@
 //! circumference or a CAN scale is off by a few percent, so the prior costs a
 //! real fit nothing (a 3 % error adds 0.09 to the cost), while it keeps an
 //! early, short window from flipping the gain's sign. A fit that still ends
-//! outside 0.7-1.3 is reported as failed (`diagnosis::limits`).
+//! outside 0.7-1.3 is reported as failed (`limits`).
 
 use super::{Columns, DistancePartials, Effect, ParamInfo, PriorRows};
-use crate::model::StartGuess;
+use crate::contract::StartGuess;
 
 /// Prior standard deviation of the gain about 1.
 const GAIN_PRIOR_SIGMA: f64 = 0.1;

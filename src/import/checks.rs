@@ -31,8 +31,8 @@
 use serde::Serialize;
 
 use super::{Mount, RideLog};
-use crate::diagnosis::structure::pearson;
 use crate::geodesy::{Geodetic, LocalFrame};
+use crate::statistics::pearson;
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]

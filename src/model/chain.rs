@@ -21,7 +21,7 @@
 //! min ||r + J delta||^2 + ||r_p + J_p delta||^2 + sum_i (lambda D_i + eps) delta_i^2,  D = diag(J^T J)
 //! ```
 //!
-//! (exactly what [`crate::optimisation::lm::damped_solve`] solves densely) is a
+//! (exactly what [`super::normal::damped_solve`] solves densely) is a
 //! linear smoothing problem over the blocks. It is solved by Householder QR
 //! of an information array `[R | z]` over (open blocks, `s`, globals), updated
 //! block by block as in Bierman's square-root information filter: a new block

@@ -21,141 +21,26 @@ mod chain;
 mod jacobian;
 mod noise;
 mod normal;
+pub use normal::damped_solve;
 mod observe;
-pub mod rotation;
-mod start;
+pub use crate::rotation;
 mod sweep;
 mod uncertainty;
 
+pub use crate::contract::{DEFAULT_BIAS_WALK, ModelError, ModelSpec, StartError, StartGuess};
 pub use chain::{ChainSystem, Marginals};
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
 pub use rotation::Increment;
-pub use start::{StartError, StartGuess};
 pub use sweep::{Evaluation, PathAt, SparsePath, Trajectory};
 pub use uncertainty::Uncertainty;
 
 use std::sync::Arc;
 
 use nalgebra::{UnitQuaternion, Vector3};
-use thiserror::Error;
 
 use crate::effects::{self, Effect, ParamInfo, PriorRows, Role};
 use crate::signals::Signals;
-
-/// Why a model could not be built.
-#[derive(Debug, Error)]
-pub enum ModelError {
-    #[error(
-        "unknown effect '{0}' (known: paper, {known})",
-        known = effects::REGISTRY.join(", ")
-    )]
-    UnknownEffect(String),
-    #[error("effect '{effect}' does not apply: {reason}")]
-    NotApplicable { effect: String, reason: String },
-    #[error("{0}")]
-    Setting(String),
-    #[error(transparent)]
-    Start(#[from] StartError),
-}
-
-/// What the model is made of: which effects, and the settings that shape them.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct ModelSpec {
-    /// Effect ids (`paper` expands to the paper's five).
-    pub effects: Vec<String>,
-    /// Length of a bias segment (s).
-    pub segment_s: f64,
-    /// Random-walk density of the segment-bias prior (deg/s/sqrt(s)); `None` = the paper (no prior).
-    pub bias_walk_dps_sqrt_s: Option<f64>,
-    /// GPS horizontal noise (m): of every fix when fixes are independent,
-    /// of the wander (the correlated part) with a correlation time.
-    pub sigma_horizontal_m: f64,
-    /// GPS altitude noise (m).
-    pub sigma_vertical_m: f64,
-    /// Barometric altitude noise (m).
-    pub sigma_baro_m: f64,
-    /// Correlation time of the GPS error (s, first-order Gauss-Markov, see
-    /// [`noise`]); `None` = independent fixes (the paper).
-    #[serde(default)]
-    pub gps_tau_s: Option<f64>,
-    /// With a correlation time: the jitter of each fix on top of the wander
-    /// (m, horizontal; the vertical one is `gps_white_vertical_m` or keeps the
-    /// ratio of the vertical sigma to the horizontal; scaled by the fix's
-    /// logged accuracy). See [`noise`].
-    #[serde(default)]
-    pub gps_white_m: f64,
-    /// The GPS heights' own jitter (m) with a correlation time, when known
-    /// apart from the horizontal one (the noise search takes it from the
-    /// heights' misfits); `None`: the horizontal jitter times the heights'
-    /// ratio `sigma_vertical_m / sigma_horizontal_m`.
-    #[serde(default)]
-    pub gps_white_vertical_m: Option<f64>,
-    /// The GPS heights' own correlation time (s), when known apart from the
-    /// horizontal one (the noise search estimates it); `None`: `gps_tau_s`.
-    /// A 3D path's heights misfit over longer times than its horizontal
-    /// fixes (the pitch follows only the heights): one correlation time for
-    /// both read that as a slow horizontal wander (a 6-hour ride: 2.57 m over
-    /// 187 s for a true 1.5 m over 60 s; 1.47 m over 59 s without the heights).
-    #[serde(default)]
-    pub gps_tau_vertical_s: Option<f64>,
-    pub increment: Increment,
-}
-
-impl Default for ModelSpec {
-    fn default() -> Self {
-        Self {
-            effects: vec!["paper".into()],
-            segment_s: 5.0,
-            bias_walk_dps_sqrt_s: Some(DEFAULT_BIAS_WALK),
-            sigma_horizontal_m: 3.0,
-            sigma_vertical_m: 8.0,
-            sigma_baro_m: 1.0,
-            gps_tau_s: None,
-            gps_white_m: 0.0,
-            gps_white_vertical_m: None,
-            gps_tau_vertical_s: None,
-            increment: Increment::Exact,
-        }
-    }
-}
-
-impl ModelSpec {
-    /// The GPS error's correlation time per axis (east, north, up): the
-    /// heights' own where set; `None` everywhere for independent fixes.
-    pub fn gps_taus(&self) -> [Option<f64>; 3] {
-        let tau = self.gps_tau_s;
-        [tau, tau, tau.and(self.gps_tau_vertical_s.or(tau))]
-    }
-
-    /// The GPS error law these settings assume, in words, to label every
-    /// misfit measured under it ("independent GPS fixes of 3.0 m", "a GPS
-    /// error wandering 0.55 m over 41 s + 0.11 m jitter"): `fit` estimates the law from the
-    /// ride while `diagnose` ranks under the law as set, so the same ride
-    /// has two fit errors and each must say which it is.
-    pub fn gps_noise_text(&self) -> String {
-        let robust = if self.effects.iter().any(|e| e == "gps_outliers") {
-            ", outliers down-weighted"
-        } else {
-            ""
-        };
-        match self.gps_tau_s {
-            Some(tau) => format!(
-                "a GPS error wandering {:.2} m over {tau:.0} s + {:.2} m jitter{robust}",
-                self.sigma_horizontal_m, self.gps_white_m
-            ),
-            None => format!(
-                "independent GPS fixes of {:.1} m{robust}",
-                self.sigma_horizontal_m
-            ),
-        }
-    }
-}
-
-/// Default random-walk density of the segment-bias prior (deg/s/sqrt(s)):
-/// the bias instability of a consumer MEMS gyro (about 10 deg/h drifting over
-/// minutes), not tuned on any ride.
-pub const DEFAULT_BIAS_WALK: f64 = 0.004;
 
 /// How far past the last fix of a window its model sweeps (s): beyond any GPS lag.
 const HORIZON_MARGIN_S: f64 = 5.0;

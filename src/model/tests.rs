@@ -207,7 +207,7 @@ fn moment_normal_equations_equal_the_dense_ones() {
 
 #[test]
 fn chain_solver_gives_the_dense_lm_step() {
-    use crate::optimisation::lm::damped_solve;
+    use crate::model::damped_solve;
     let full = catalogue_model();
     // A step-1 window: observations up to 35 s, segments reached by then free.
     let window = full.restricted(full.signals.t[0] + 35.0).unwrap();

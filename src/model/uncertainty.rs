@@ -15,9 +15,9 @@
 use nalgebra::DVector;
 
 use super::chain::PathRows;
+use super::normal::damped_solve;
 use super::{Marginals, Model};
 use crate::effects::Role;
-use crate::optimisation::lm::damped_solve;
 
 /// Longest lag (fixes) of the residual autocorrelation that widens the sigmas.
 const MAX_LAG: usize = 120;

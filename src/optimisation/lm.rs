@@ -10,8 +10,7 @@
 //! The paper's LM diverged because it took every step; this one never
 //! raises the cost.
 
-use faer::linalg::solvers::Solve;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 use crate::model::{ChainSystem, Evaluation, Model, NormalEquations};
 
@@ -49,24 +48,7 @@ pub struct StepOutcome {
     pub evaluation: Option<Evaluation>,
 }
 
-/// Solve `(A + lambda D) x = b` by Cholesky, `D = diag(A)` floored at
-/// `1e-9 max(diag)` (and at 1e-12 absolute) so directions the data cannot see keep a finite step.
-pub fn damped_solve(a: &DMatrix<f64>, b: &DVector<f64>, lambda: f64) -> Option<DVector<f64>> {
-    let n = a.nrows();
-    let max_diag = (0..n).map(|i| a[(i, i)]).fold(0.0f64, f64::max);
-    let floor = (1e-9 * max_diag).max(1e-12);
-    let mut m = a.clone();
-    for i in 0..n {
-        m[(i, i)] += lambda * a[(i, i)].max(floor) + 1e-15 * max_diag;
-    }
-    // faer's blocked, multi-threaded Cholesky: about 4x nalgebra's on 1,000+ parameters.
-    let fm = faer::Mat::<f64>::from_fn(n, n, |i, j| m[(i, j)]);
-    let llt = fm.as_ref().llt(faer::Side::Lower).ok()?;
-    let mut rhs = faer::Mat::<f64>::from_fn(n, 1, |i, _| b[i]);
-    llt.solve_in_place(&mut rhs);
-    let x = DVector::from_fn(n, |i, _| rhs[(i, 0)]);
-    x.iter().all(|v| v.is_finite()).then_some(x)
-}
+pub use crate::model::damped_solve;
 
 /// The damped Gauss-Newton problem of one iteration: in chain form (O(N)) when
 /// the model allows it, else the dense normal equations.

@@ -643,14 +643,14 @@ impl Reconstruction {
     /// Whether the noise search is still to run: asked for, not yet run on
     /// this model, and a model with segment biases (the bias walk and the GPS
     /// noise are only told apart through them).
-    /// A fit that breaks a physical limit (see [`crate::diagnosis::limits`])
+    /// A fit that breaks a physical limit (see [`crate::limits`])
     /// is not searched: a loose bias walk would let the segment biases hide
     /// what is wrong (wrong axes, units), and the fit must fail with its cause.
     fn wants_noise(&self) -> bool {
         self.settings.auto_noise.any()
             && !self.noise_done
             && self.has_segments()
-            && crate::diagnosis::limits::parameters(&self.model, &self.theta).is_empty()
+            && crate::limits::parameters(&self.model, &self.theta).is_empty()
     }
 
     /// The spec the fit runs: `spec` with the estimated noise in place of

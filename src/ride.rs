@@ -1,0 +1,92 @@
+//! The ride as data: the raw columns of a ride log in the file's units,
+//! whatever read them. The importers (`import/`) produce it; the derived
+//! signals (`signals`) and the simulator's tests read it. It sits at the
+//! bottom, so that nothing that reads a ride depends on the readers of
+//! every format.
+
+use std::collections::BTreeMap;
+
+/// Raw columns of a ride log, in the file's units.
+#[derive(Clone, Debug, Default)]
+pub struct RideLog {
+    /// Where it came from (for messages).
+    pub source: String,
+    /// `# key: value` comments before the header.
+    pub metadata: BTreeMap<String, String>,
+    /// 1-based line number of each data row in the file (for a bag: the row number).
+    pub line: Vec<u64>,
+    pub t_s: Vec<f64>,
+    /// Angular rate in deg/s, sensor frame (x forward, y left, z up once mounted).
+    pub gyro_dps: Vec<[f64; 3]>,
+    pub wheel_pulse: Option<Vec<bool>>,
+    pub odo_m: Option<Vec<Option<f64>>>,
+    /// Signed forward speed (m/s), an odometer alternative (integrated to distance).
+    pub speed_mps: Option<Vec<Option<f64>>>,
+    /// (lat, lon) in degrees, `None` where the row has no fix.
+    pub fix: Vec<Option<(f64, f64)>>,
+    pub gps_alt_m: Option<Vec<Option<f64>>>,
+    /// 1-sigma horizontal accuracy of the fix on this row (m).
+    pub gps_hacc_m: Option<Vec<Option<f64>>>,
+    /// 1-sigma vertical accuracy of the fix on this row (m).
+    pub gps_vacc_m: Option<Vec<Option<f64>>>,
+    pub baro_alt_m: Option<Vec<Option<f64>>>,
+    /// Specific force (m/s^2) in the same frame as the gyro, where logged.
+    pub accel_mps2: Option<Vec<Option<[f64; 3]>>>,
+    /// Extra numeric channels, by column name, in file order.
+    pub channels: Vec<(String, Vec<Option<f64>>)>,
+    /// Notes about the file that are not errors (dropped text columns, ...).
+    pub warnings: Vec<String>,
+}
+
+impl RideLog {
+    /// Give back the columns' growth slack (up to half of a long log's
+    /// memory) before the signals are derived from them.
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.line.shrink_to_fit();
+        self.t_s.shrink_to_fit();
+        self.gyro_dps.shrink_to_fit();
+        self.fix.shrink_to_fit();
+        for c in [
+            &mut self.odo_m,
+            &mut self.speed_mps,
+            &mut self.gps_alt_m,
+            &mut self.gps_hacc_m,
+            &mut self.gps_vacc_m,
+            &mut self.baro_alt_m,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            c.shrink_to_fit();
+        }
+        if let Some(p) = &mut self.wheel_pulse {
+            p.shrink_to_fit();
+        }
+        if let Some(a) = &mut self.accel_mps2 {
+            a.shrink_to_fit();
+        }
+        for (_, c) in &mut self.channels {
+            c.shrink_to_fit();
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.t_s.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.t_s.is_empty()
+    }
+
+    /// Configured wheel circumference, when the metadata gives one.
+    pub fn wheel_circumference_m(&self) -> Option<&str> {
+        self.metadata
+            .get("wheel_circumference_m")
+            .map(String::as_str)
+    }
+
+    /// Number of GPS fixes.
+    pub fn fix_count(&self) -> usize {
+        self.fix.iter().filter(|f| f.is_some()).count()
+    }
+}
