@@ -1,0 +1,237 @@
+//! `gyropath fit` on several rides or a folder: every ride on all cores, outputs
+//! that never collide, and a summary table.
+
+use super::fit::write_path;
+use super::*;
+
+/// One line of the batch summary.
+struct BatchRow {
+    ride: String,
+    outcome: Result<FitReport, String>,
+}
+
+/// Every `.csv`, `.bag` and `.mcap` in the given files and folders (folders not
+/// recursed; a rosbag2 folder is one ride), sorted.
+fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+    let mut rides = Vec::new();
+    for input in inputs {
+        if input.is_dir() && !input.join("metadata.yaml").is_file() {
+            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
+                .with_context(|| format!("cannot list {}", input.display()))?
+                .filter_map(|e| e.ok().map(|e| e.path()))
+                .filter(|p| {
+                    p.extension().is_some_and(|x| {
+                        ["csv", "bag", "mcap"]
+                            .iter()
+                            .any(|e| x.eq_ignore_ascii_case(e))
+                    })
+                })
+                .collect();
+            found.sort();
+            rides.extend(found);
+        } else {
+            rides.push(input.clone());
+        }
+    }
+    if rides.is_empty() {
+        anyhow::bail!("no ride logs (*.csv, *.bag, *.mcap) found in the given folders");
+    }
+    Ok(rides)
+}
+
+/// The names of a batch's outputs, one per ride: the ride's file stem, with
+/// as many of its folders before it as it takes to tell it from every other
+/// ride (`comma/ride.csv` and `berlin/ride.csv` become `comma-ride` and
+/// `berlin-ride`), so one ride's outputs never overwrite another's. The same
+/// ride given twice is an error that names it.
+fn output_stems(rides: &[PathBuf]) -> Result<Vec<String>> {
+    let parts: Vec<Vec<String>> = rides
+        .iter()
+        .map(|ride| {
+            let absolute = std::path::absolute(ride).unwrap_or_else(|_| ride.clone());
+            let mut parts: Vec<String> = absolute
+                .parent()
+                .into_iter()
+                .flat_map(|p| p.components())
+                .filter_map(|c| match c {
+                    std::path::Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                    _ => None,
+                })
+                .collect();
+            parts.push(
+                absolute
+                    .file_stem()
+                    .map_or_else(|| "ride".into(), |s| s.to_string_lossy().into_owned()),
+            );
+            parts
+        })
+        .collect();
+    let name = |p: &[String], k: usize| p[p.len() - k.min(p.len())..].join("-");
+    let mut depth = vec![1usize; rides.len()];
+    loop {
+        let names: Vec<String> = (0..rides.len())
+            .map(|i| name(&parts[i], depth[i]))
+            .collect();
+        let twin = |i: usize| (0..rides.len()).find(|&j| j != i && names[j] == names[i]);
+        let clashing: Vec<usize> = (0..rides.len()).filter(|&i| twin(i).is_some()).collect();
+        if clashing.is_empty() {
+            return Ok(names);
+        }
+        if let Some(&i) = clashing.iter().find(|&&i| depth[i] >= parts[i].len()) {
+            anyhow::bail!(
+                "{} and {} would write the same outputs ({}-path.csv): give each ride once",
+                rides[twin(i).unwrap_or(i)].display(),
+                rides[i].display(),
+                names[i]
+            );
+        }
+        for i in clashing {
+            depth[i] += 1;
+        }
+    }
+}
+
+/// A batch ride's reference: `reference` itself where it exists, else a file
+/// of that name beside the ride (none if there is none).
+fn reference_for(ride: &Path, reference: Option<&Path>) -> Option<PathBuf> {
+    let r = reference?;
+    if r.exists() {
+        return Some(r.to_path_buf());
+    }
+    let beside = ride.parent().unwrap_or(Path::new(".")).join(r);
+    beside.is_file().then_some(beside)
+}
+
+/// Fit one ride of a batch and write its outputs into `out_dir` as
+/// `STEM-path.csv` and `STEM-report.json` (nothing without an `out_dir`).
+fn fit_one(
+    ride: &Path,
+    source: &SourceArgs,
+    settings: &FitSettings,
+    out_dir: Option<&Path>,
+    stem: &str,
+    reference: Option<&Path>,
+) -> Result<FitReport> {
+    let started = Instant::now();
+    let reference = reference_for(ride, reference)
+        .map(|p| gyropath::import::read_reference(&p))
+        .transpose()?;
+    let signals = Arc::new(load_signals(ride, source, true)?);
+    let against = matched_reference(reference, &signals)?;
+    let mut fit = Reconstruction::new(signals, settings.clone())?;
+    fit.finish();
+    physical(&fit)?;
+    let uncertainty = fit.model().uncertainty(fit.params());
+    let elapsed = started.elapsed().as_secs_f64();
+    let mut report = match &uncertainty {
+        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
+        None => FitReport::new(&fit, elapsed),
+    };
+    if let Some((r, m)) = &against {
+        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
+    }
+    if let Some(dir) = out_dir {
+        write_path(
+            &dir.join(format!("{stem}-path.csv")),
+            PathFormat::Csv,
+            ride,
+            &fit,
+            uncertainty.as_ref(),
+        )?;
+        write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
+    }
+    Ok(report)
+}
+
+/// Batch mode: every ride on all cores (one ride per task; each fit is
+/// sequential apart from the linear algebra), then a summary table. Rides that
+/// fail are reported in the table and make the exit status 1, but never stop the others.
+pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
+    use rayon::prelude::*;
+    if args.out.is_some() || args.json.is_some() {
+        anyhow::bail!("with several rides use --out-dir instead of --out/--json");
+    }
+    // Without --out-dir a batch writes no files: a folder of rides must not
+    // scatter outputs into the working directory.
+    let out_dir = args.out_dir.as_deref();
+    if let Some(dir) = out_dir {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
+    }
+    let settings = args.settings.settings()?;
+    let rides = collect_rides(&args.rides)?;
+    let stems = output_stems(&rides)?;
+    let started = Instant::now();
+    let rows: Vec<BatchRow> = rides
+        .par_iter()
+        .zip(stems.par_iter())
+        .map(|(ride, stem)| {
+            let outcome = fit_one(
+                ride,
+                &args.source,
+                &settings,
+                out_dir,
+                stem,
+                args.reference.as_deref(),
+            )
+            .map_err(|e| format!("{e:#}"));
+            if !args.quiet {
+                eprintln!(
+                    "{} {}",
+                    if outcome.is_ok() { "fitted" } else { "FAILED" },
+                    ride.display()
+                );
+            }
+            BatchRow {
+                ride: ride.display().to_string(),
+                outcome,
+            }
+        })
+        .collect();
+    println!(
+        "{:<40} {:>8} {:>6} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "ride", "min", "fixes", "fit RMS", "vert RMS", "yaw bias", "gain", "ref RMS"
+    );
+    let mut failed = 0;
+    for row in &rows {
+        match &row.outcome {
+            Ok(r) => {
+                let value = |e: &str, n: &str| r.value(e, n).unwrap_or(f64::NAN);
+                let vertical = r.stats.rms_baro_up_m.or(r.stats.rms_gps_up_m);
+                println!(
+                    "{:<40} {:>8.1} {:>6} {:>7.3} m {:>9} {:>5.3}°/s {:>8.4} {:>9}",
+                    row.ride,
+                    r.duration_s / 60.0,
+                    r.gps_fixes,
+                    r.stats.rms_horizontal_m,
+                    vertical.map_or("-".into(), |v| format!("{v:.3} m")),
+                    r.bias_total[2].map_or(f64::NAN, |t| t.mean_dps),
+                    value("odometer_gain", "gain"),
+                    r.reference
+                        .as_ref()
+                        .map_or("-".into(), |c| format!("{:.3} m", c.horizontal.rms_m)),
+                );
+            }
+            Err(e) => {
+                failed += 1;
+                println!("{:<40} failed: {e}", row.ride);
+            }
+        }
+    }
+    println!(
+        "{} rides, {} fitted, {} failed, {:.1} s on {} threads; {}",
+        rows.len(),
+        rows.len() - failed,
+        failed,
+        started.elapsed().as_secs_f64(),
+        rayon::current_num_threads(),
+        match out_dir {
+            Some(d) => format!("outputs in {}", d.display()),
+            None => "no files written (--out-dir DIR keeps each ride's path and report)".into(),
+        }
+    );
+    if failed > 0 {
+        anyhow::bail!("{failed} of {} rides could not be fitted", rows.len());
+    }
+    Ok(())
+}

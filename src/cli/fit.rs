@@ -1,0 +1,278 @@
+//! `gyropath fit RIDE`: one ride fitted, its summary, path and report.
+
+use super::batch::fit_batch;
+use super::*;
+
+#[derive(Debug, Args)]
+pub struct FitArgs {
+    /// Ride log(s) (CSV, see the ride-log format), or folders of them: more
+    /// than one, a folder, or --out-dir fits them all in parallel (batch mode).
+    #[arg(required = true, num_args = 1..)]
+    pub rides: Vec<PathBuf>,
+    #[command(flatten)]
+    pub source: SourceArgs,
+    #[command(flatten)]
+    pub settings: SettingsArgs,
+    /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
+    #[arg(long)]
+    pub out_dir: Option<PathBuf>,
+    /// Write the reconstructed path here, in the format its extension names:
+    /// `.csv` (t_s,lat_deg,lon_deg,alt_m,...; - for standard output), `.gpx`,
+    /// or `.tum` (a TUM trajectory for evo, in Unix time when the source has it).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the fit report here (JSON; - for standard output). `--report`
+    /// is an older name for it.
+    #[arg(long, alias = "report")]
+    pub json: Option<PathBuf>,
+    /// A better track of the same drive to measure the path against (RTK, an
+    /// INS): `t_s,lat_deg,lon_deg[,alt_m]` CSV on the ride's clock. In a batch
+    /// a file name that does not exist is looked up beside each ride
+    /// (`--reference truth.csv`). Example: `gyropath fit ride.csv --reference truth.csv`.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(long, short)]
+    pub quiet: bool,
+    /// Also print every iteration's cost and the segment lengths' -2 ln L.
+    #[arg(long, short)]
+    pub verbose: bool,
+}
+
+fn phase_name(p: Phase) -> &'static str {
+    match p {
+        Phase::Step1 => "step 1",
+        Phase::Step2 => "step 2",
+        Phase::Noise => "noise",
+        Phase::Done => "done",
+    }
+}
+
+pub(super) fn progress_line(r: &IterationReport) -> String {
+    format!(
+        "{:>4} {} {:<2} cost {:>12.4} rms {:>7.3} m {} {}{}",
+        r.iteration,
+        phase_name(r.phase),
+        match r.method {
+            Method::Lm => "lm",
+            Method::Gd => "gd",
+        },
+        r.cost,
+        r.rms_horizontal_m,
+        match r.method {
+            Method::Lm => format!("lambda {:.1e}", r.damping),
+            Method::Gd => format!("gamma {:.1e}", r.step_size),
+        },
+        if r.accepted { "" } else { "(step rejected) " },
+        if r.phase_finished { "(converged)" } else { "" }
+    )
+}
+
+pub fn fit(args: &FitArgs) -> Result<()> {
+    let folder_of_rides = args.rides[0].is_dir() && !args.rides[0].join("metadata.yaml").is_file();
+    let batch = args.rides.len() > 1 || args.out_dir.is_some() || folder_of_rides;
+    if batch {
+        return fit_batch(args);
+    }
+    let ride = &args.rides[0];
+    let started = Instant::now();
+    let settings = args.settings.settings()?;
+    // The outputs' names are checked before the fit, not after minutes of it.
+    let path_format = args.out.as_deref().map(PathFormat::of).transpose()?;
+    if let Some(rep) = &args.json {
+        check_report_name(rep)?;
+    }
+    let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(is_stdout);
+    if to_stdout(&args.out) && to_stdout(&args.json) {
+        anyhow::bail!("--out and --json cannot both go to standard output");
+    }
+    let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.json);
+    let reference = args
+        .reference
+        .as_deref()
+        .map(gyropath::import::read_reference)
+        .transpose()?;
+    let signals = Arc::new(load_signals(ride, &args.source, args.quiet)?);
+    if !args.quiet {
+        for w in &signals.warnings {
+            eprintln!("warning: {w}");
+        }
+    }
+    let against = matched_reference(reference, &signals)?;
+    let mut fit = Reconstruction::new(signals, settings)?;
+    let terminal = std::io::stderr().is_terminal() && !args.quiet;
+    let bar = terminal.then(|| {
+        let bar = indicatif::ProgressBar::new_spinner();
+        bar.enable_steady_tick(std::time::Duration::from_millis(120));
+        bar
+    });
+    let verbose = args.verbose && !args.quiet;
+    fit.run(&mut |_: &Reconstruction, r: &IterationReport| {
+        let line = progress_line(r);
+        match &bar {
+            Some(b) => b.set_message(line),
+            None if verbose => eprintln!("{line}"),
+            None => {}
+        }
+    });
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+    physical(&fit)?;
+    let uncertainty = (args.out.is_some() || args.json.is_some())
+        .then(|| fit.model().uncertainty(fit.params()))
+        .flatten();
+    let elapsed = started.elapsed().as_secs_f64();
+    let mut report = match &uncertainty {
+        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
+        None => FitReport::new(&fit, elapsed),
+    };
+    if let Some((r, m)) = &against {
+        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
+    }
+    if let (Some(out), Some(format)) = (&args.out, path_format) {
+        write_path(out, format, ride, &fit, uncertainty.as_ref())?;
+    }
+    if let Some(rep) = &args.json {
+        write_report(rep, ride, &report)?;
+    }
+    if !args.quiet {
+        // Data on standard output: the summary goes to standard error.
+        let summary = summary_text(&report, args.verbose);
+        if data_is_stdout {
+            eprint!("{summary}");
+        } else {
+            print!("{summary}");
+        }
+    }
+    Ok(())
+}
+
+/// Write the fitted path to `out` in `format`.
+pub(super) fn write_path(
+    out: &Path,
+    format: PathFormat,
+    ride: &Path,
+    fit: &Reconstruction,
+    uncertainty: Option<&gyropath::model::Uncertainty>,
+) -> Result<()> {
+    match format {
+        PathFormat::Csv => write_atomically(out, Some(ride), |w| {
+            write_path_csv(w, fit.model(), fit.params(), uncertainty)
+        }),
+        PathFormat::Gpx => {
+            let trajectory = fit.trajectory();
+            write_atomically(out, Some(ride), |w| {
+                write_path_gpx(w, fit.model(), &trajectory)
+            })
+        }
+        PathFormat::Tum => write_atomically(out, Some(ride), |w| {
+            write_path_tum(w, fit.model(), fit.params())
+        }),
+    }
+    .context("the path could not be written")
+}
+
+/// Differences of `-2 ln L` below this are no evidence for one segment
+/// length over another (a likelihood ratio of about 7).
+const SEGMENT_EVIDENCE: f64 = 4.0;
+
+/// The terminal summary of a fit.
+pub(super) fn summary_text(r: &FitReport, verbose: bool) -> String {
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    _ = writeln!(
+        out,
+        "ride      {} ({} rows, {:.0} s, {} GPS fixes)",
+        r.source, r.rows, r.duration_s, r.gps_fixes
+    );
+    _ = writeln!(out, "model     {}", r.model.join(", "));
+    _ = writeln!(out, "attitude  {}", r.attitude);
+    match &r.noise {
+        Some(n) => _ = writeln!(out, "noise     from the ride: {}", n.describe()),
+        None => {
+            _ = writeln!(
+                out,
+                "noise     GPS sigma {:.2} m, {}, bias walk {} (set)",
+                r.gps_sigma_m,
+                r.gps_tau_s.map_or("independent fixes".into(), |t| format!(
+                    "correlated over {t:.0} s, jitter {:.2} m",
+                    r.gps_white_m
+                )),
+                r.bias_walk
+                    .map_or("none".into(), |w| format!("{w:.4} deg/s/sqrt(s)"))
+            )
+        }
+    }
+    if let Some(&(best, _)) = r
+        .segment_preference
+        .iter()
+        .find(|v| v.1 == 0.0)
+        .filter(|_| verbose)
+    {
+        let spread = r.segment_preference.iter().map(|v| v.1).fold(0.0, f64::max);
+        let lengths: Vec<String> = r
+            .segment_preference
+            .iter()
+            .map(|(s, d)| format!("{s} s {d:+.1}"))
+            .collect();
+        if spread < SEGMENT_EVIDENCE {
+            _ = writeln!(
+                out,
+                "segments  no length preferred ({}, -2 ln L): the bias walk sets the smoothing",
+                lengths.join(", ")
+            );
+        } else {
+            _ = writeln!(
+                out,
+                "segments  the ride prefers {best} s ({}, -2 ln L)",
+                lengths.join(", ")
+            );
+        }
+    }
+    _ = writeln!(
+        out,
+        "iters     step 1: {}, step 2: {}",
+        r.iterations_step1, r.iterations_step2
+    );
+    _ = writeln!(out, "cost      {:.4}", r.stats.cost);
+    _ = writeln!(
+        out,
+        "rms       path to the fixes {:.3} m horizontal (under {})",
+        r.stats.rms_horizontal_m, r.gps_noise
+    );
+    if let Some(v) = r.stats.rms_gps_up_m {
+        _ = writeln!(out, "          GPS altitude {v:.3} m");
+    }
+    if let Some(v) = r.stats.rms_baro_up_m {
+        _ = writeln!(out, "          barometer {v:.3} m");
+    }
+    for (axis, total) in ["x", "y", "z"].iter().zip(&r.bias_total) {
+        if let Some(t) = total {
+            _ = writeln!(out, "bias      total {axis} {}", t.describe());
+        }
+    }
+    for (effect, values) in &r.parameters {
+        if effect == "gyro_bias_segments" {
+            let n = values.len() / 3;
+            _ = writeln!(out, "{effect}: {n} segments (see --json)");
+            continue;
+        }
+        let list: Vec<String> = values
+            .iter()
+            .map(|p| format!("{} {}", p.name, p.describe()))
+            .collect();
+        let part = if effect == "gyro_bias" && r.parameters.contains_key("gyro_bias_segments") {
+            " (constant part)"
+        } else {
+            ""
+        };
+        _ = writeln!(out, "{effect}{part}: {}", list.join(", "));
+    }
+    if let Some(c) = &r.reference {
+        _ = writeln!(out, "reference {}: {}", c.reference, c.coverage());
+        _ = writeln!(out, "          {}", c.describe());
+    }
+    _ = writeln!(out, "time      {:.2} s", r.elapsed_s);
+    out
+}
