@@ -1,0 +1,54 @@
+//! The log itself: its sample rate, and a gyro pinned at its range.
+
+use super::*;
+
+pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) {
+    let mut dt: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    let rate = 1.0 / crate::statistics::median(&mut dt);
+    let (level, note) = if rate < 20.0 {
+        (
+            Level::Info,
+            ": a coarse integration step; fast turns are smoothed",
+        )
+    } else {
+        (Level::Ok, "")
+    };
+    report.say(
+        "sample rate",
+        level,
+        format!(
+            "{} rows at {rate:.1} Hz over {:.0} s, time increasing{note}",
+            log.len(),
+            log.t_s[log.len() - 1] - log.t_s[0]
+        ),
+    );
+}
+
+/// Rows pinned at an axis's extreme: a saturated gyro.
+pub(super) fn saturation(log: &RideLog, report: &mut CheckReport) {
+    for a in 0..3 {
+        let max = log
+            .gyro_dps
+            .iter()
+            .map(|g| g[a].abs())
+            .fold(0.0f64, f64::max);
+        if max < 30.0 {
+            continue;
+        }
+        let pinned = log
+            .gyro_dps
+            .iter()
+            .filter(|g| g[a].abs() >= max * (1.0 - 1e-9))
+            .count();
+        if pinned >= 5 {
+            report.say(
+                "gyro saturation",
+                Level::Warning,
+                format!(
+                    "axis {} sits at +-{max:.1} (as labelled) on {pinned} rows: it looks saturated, and turns there are lost",
+                    ['x', 'y', 'z'][a]
+                ),
+            );
+        }
+    }
+}

@@ -1,0 +1,332 @@
+//! Axes, units and datum checked against the data itself, on every load.
+//!
+//! A log's labels can lie (a phone's axes, a bag with no mounting, rad/s
+//! written as deg/s); its physics cannot. Each check compares two things that
+//! must agree on a moving vehicle:
+//!
+//! - **Vertical axis and its sign.** At rest and on average a vehicle is
+//!   level, so the accelerometer's mean (specific force) points up with
+//!   |g| = 9.8 m/s^2. Without an accelerometer: the GPS course turns with the
+//!   yaw rate, so between consecutive stretches of the track
+//!   `delta course = beta * integral(omega_a dt) + b dt`, fitted for each
+//!   axis a (b absorbs a constant bias); the axis that explains the course
+//!   (largest R^2) is vertical, the sign of beta its sign.
+//! - **Gyro units.** On that axis beta is 1 when the gyro is in deg/s as
+//!   labelled; 57.3 when rad/s were logged as deg/s (turns 57 times too
+//!   small); 1/57.3 the other way round.
+//! - **Forward axis.** The accelerometer along the forward axis follows the
+//!   odometer's dv/dt; along the left axis it follows the centripetal
+//!   acceleration v * omega_up. Of the four signed horizontal axes the one
+//!   that best explains both is forward (left then completes a right-handed
+//!   frame). Without an accelerometer forward cannot be told from the data;
+//!   a wrong guess there is a turn about the vertical, which the fitted start
+//!   heading absorbs.
+//! - **Odometer scale and sign** against the GPS track length; a **saturated
+//!   gyro** (rows pinned at the same extreme); **GPS altitude** datum and
+//!   jumps; the **sample rate**.
+//!
+//! The checks read the log as it is, before any mounting; the recommended
+//! mounting is what `--mount auto` applies.
+
+use serde::Serialize;
+
+use super::{Mount, RideLog};
+use crate::geodesy::{Geodetic, LocalFrame};
+use crate::statistics::pearson;
+
+mod axes;
+mod log;
+mod track;
+
+use axes::{
+    accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
+};
+use log::{sample_rate, saturation};
+use track::{AtFix, STRETCH_M, altitude, odometer_scale, stretches, summarise};
+
+/// How much a verdict matters.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+pub enum Level {
+    /// Checked and fine.
+    Ok,
+    /// Worth knowing, nothing wrong.
+    Info,
+    /// Could not be checked, or something looks off.
+    Warning,
+    /// The data contradict the labels: results would be wrong.
+    Problem,
+}
+
+impl Level {
+    pub fn label(self) -> &'static str {
+        match self {
+            Self::Ok => "ok",
+            Self::Info => "info",
+            Self::Warning => "warning",
+            Self::Problem => "PROBLEM",
+        }
+    }
+}
+
+/// One finding.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Verdict {
+    /// What was checked ("vertical axis", "gyro units", ...).
+    pub subject: String,
+    pub level: Level,
+    pub message: String,
+}
+
+/// Which logged axis plays a role, with its sign and how strongly the data say so.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct AxisFinding {
+    /// Logged axis 0 x, 1 y, 2 z.
+    pub axis: usize,
+    pub sign: f64,
+    /// Strength of the evidence: a correlation (course or accelerometer), or the cosine of the tilt.
+    pub r: f64,
+    /// What it was told by.
+    pub by: &'static str,
+}
+
+/// Everything the checks found.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CheckReport {
+    pub verdicts: Vec<Verdict>,
+    /// The mounting that makes the log x forward, y left, z up in deg/s
+    /// (`None` when the data cannot tell the vertical).
+    #[serde(serialize_with = "as_text")]
+    pub recommended: Option<Mount>,
+    pub vertical: Option<AxisFinding>,
+    pub forward: Option<AxisFinding>,
+    /// GPS course turn per gyro turn on the vertical axis (1 for deg/s as labelled).
+    pub course_per_gyro: Option<f64>,
+    /// Odometer distance per GPS track length.
+    pub odometer_per_gps: Option<f64>,
+}
+
+fn as_text<S: serde::Serializer>(m: &Option<Mount>, s: S) -> Result<S::Ok, S::Error> {
+    match m {
+        Some(m) => s.serialize_some(&m.to_string()),
+        None => s.serialize_none(),
+    }
+}
+
+impl CheckReport {
+    fn say(&mut self, subject: &str, level: Level, message: String) {
+        self.verdicts.push(Verdict {
+            subject: subject.into(),
+            level,
+            message,
+        });
+    }
+
+    /// The worst level found.
+    pub fn worst(&self) -> Level {
+        self.verdicts
+            .iter()
+            .map(|v| v.level)
+            .max()
+            .unwrap_or(Level::Ok)
+    }
+
+    /// The verdicts as they stand once `applied` is the mounting: an axis or
+    /// unit problem that the applied mounting undoes becomes a note saying so.
+    pub fn after_mounting(&self, applied: Option<&Mount>) -> Vec<Verdict> {
+        let undone = applied.is_some() && applied == self.recommended.as_ref();
+        self.verdicts
+            .iter()
+            .map(|v| {
+                let axes = matches!(
+                    v.subject.as_str(),
+                    "vertical axis" | "forward axis" | "gyro units"
+                );
+                if undone && axes && v.level == Level::Problem {
+                    Verdict {
+                        subject: v.subject.clone(),
+                        level: Level::Info,
+                        message: format!(
+                            "{} (as logged; the mounting {} applied undoes it)",
+                            v.message,
+                            applied.map(ToString::to_string).unwrap_or_default()
+                        ),
+                    }
+                } else {
+                    v.clone()
+                }
+            })
+            .collect()
+    }
+
+    /// Lines to warn a user with, given the mounting that was applied on load.
+    pub fn warnings(&self, applied: Option<&Mount>) -> Vec<String> {
+        let mut out: Vec<String> = self
+            .after_mounting(applied)
+            .into_iter()
+            .filter(|v| v.level >= Level::Warning)
+            .map(|v| format!("{}: {}", v.subject, v.message))
+            .collect();
+        if let Some(rec) = &self.recommended {
+            let applied_or_identity = applied.cloned().unwrap_or_else(Mount::identity);
+            if *rec != applied_or_identity {
+                out.push(format!(
+                    "mounting: the data say '{rec}' (--mount \"{rec}\" or --mount auto), the log is read as '{applied_or_identity}'"
+                ));
+            }
+        }
+        out
+    }
+}
+
+/// Check a log.
+pub fn check(log: &RideLog) -> CheckReport {
+    let mut report = CheckReport::default();
+    if log.len() < 2 {
+        report.say("rows", Level::Problem, "fewer than two rows".into());
+        return report;
+    }
+    sample_rate(log, &mut report);
+    saturation(log, &mut report);
+    let fixes = summarise(log);
+    let accel_up = accelerometer_vertical(log, &mut report);
+    let course = course_vertical(&fixes, &mut report);
+    let vertical = match (accel_up, course) {
+        (Some(a), Some((c, _))) if a.axis != c.axis || a.sign != c.sign => {
+            report.say(
+                "vertical axis",
+                Level::Problem,
+                format!(
+                    "the accelerometer says {} is up, the GPS course says {}: the two sensors' axes disagree",
+                    signed(a.axis, a.sign),
+                    signed(c.axis, c.sign)
+                ),
+            );
+            Some(c)
+        }
+        (Some(a), _) => Some(a),
+        (None, Some((c, _))) => Some(c),
+        (None, None) => None,
+    };
+    if let Some(v) = vertical {
+        report.vertical = Some(v);
+        let level = if v.axis == 2 && v.sign > 0.0 {
+            Level::Ok
+        } else {
+            Level::Problem
+        };
+        report.say(
+            "vertical axis",
+            level,
+            format!(
+                "{} points up (by {}, r = {:+.2}){}",
+                signed(v.axis, v.sign),
+                v.by,
+                v.r,
+                if level == Level::Ok {
+                    String::new()
+                } else {
+                    " - the log's z is not up".into()
+                }
+            ),
+        );
+    }
+    if let Some((c, beta)) = course {
+        gyro_units(beta, c, &mut report);
+    }
+    let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
+    report.forward = forward;
+    odometer_scale(&fixes, &mut report);
+    altitude(log, &fixes, &mut report);
+    if let Some(v) = vertical {
+        let fwd = forward.map_or_else(
+            || {
+                // No evidence: keep the logged order as far as the vertical allows.
+                let a = (0..3).find(|&a| a != v.axis).unwrap_or(0);
+                (a, 1.0)
+            },
+            |f| (f.axis, f.sign),
+        );
+        report.recommended = Mount::from_forward_up(fwd, (v.axis, v.sign)).map(|mut m| {
+            if let Some(s) = report.course_per_gyro.and_then(unit_factor) {
+                m.scale = s;
+            }
+            m
+        });
+    }
+    report
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ride() -> RideLog {
+        crate::testing::winding_log(600.0, 50.0)
+    }
+
+    #[test]
+    fn a_log_in_the_ride_frame_passes() {
+        let log = ride();
+        let r = check(&log);
+        assert_eq!(r.recommended, Some(Mount::identity()), "{:#?}", r.verdicts);
+        let v = r.vertical.unwrap();
+        assert_eq!((v.axis, v.sign), (2, 1.0));
+        assert!(r.worst() < Level::Problem, "{:#?}", r.verdicts);
+        let c = r.course_per_gyro.unwrap();
+        assert!((c - 1.0).abs() < 0.1, "{c}");
+        let o = r.odometer_per_gps.unwrap();
+        assert!((o - 1.0).abs() < 0.05, "{o}");
+    }
+
+    #[test]
+    fn permuted_axes_and_radians_are_named_with_the_mapping_that_undoes_them() {
+        let truth: Mount = "x=-z,y=-x,z=y".parse().unwrap();
+        let mut log = ride();
+        // Write the ride as the Husky's IMU would see it: logged = inverse(truth) of ride.
+        for g in &mut log.gyro_dps {
+            let ride = *g;
+            let mut logged = [0.0; 3];
+            for i in 0..3 {
+                logged[truth.axis[i]] = truth.sign[i] * ride[i];
+            }
+            *g = logged.map(|w| w.to_radians());
+        }
+        let r = check(&log);
+        let rec = r.recommended.clone().unwrap();
+        assert_eq!(rec.sign[2], 1.0);
+        assert_eq!(rec.axis[2], 1, "{:#?}", r.verdicts);
+        assert!((rec.scale - 57.29578).abs() < 1e-3, "{rec}");
+        assert!(
+            r.verdicts
+                .iter()
+                .any(|v| v.subject == "gyro units" && v.level == Level::Problem)
+        );
+        // Undone, the yaw is the ride's again.
+        let mut fixed = log.clone();
+        rec.apply(&mut fixed);
+        let orig = ride();
+        for j in (0..orig.len()).step_by(997) {
+            assert!((fixed.gyro_dps[j][2] - orig.gyro_dps[j][2]).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_sign_flipped_odometer_and_a_saturated_gyro_are_reported() {
+        let mut log = ride();
+        for o in log.odo_m.as_mut().unwrap().iter_mut().flatten() {
+            *o = -*o;
+        }
+        for g in log.gyro_dps.iter_mut().take(40) {
+            g[0] = 250.0;
+        }
+        let r = check(&log);
+        assert!(
+            r.verdicts
+                .iter()
+                .any(|v| v.subject == "odometer" && v.message.contains("backwards")),
+            "{:#?}",
+            r.verdicts
+        );
+        assert!(r.verdicts.iter().any(|v| v.subject == "gyro saturation"));
+    }
+}

@@ -1,0 +1,169 @@
+//! The GPS track against the odometer: per-fix summaries of the log, course
+//! stretches, the odometer's scale and sign, the GPS altitude.
+
+use super::*;
+
+/// Course stretches at least this long (m) along the odometer: GPS noise of a
+/// few metres then moves a course by a few degrees, not tens.
+pub(super) const STRETCH_M: f64 = 15.0;
+
+/// Per-fix summaries: everything the checks need, O(fixes) in memory.
+pub(super) struct AtFix {
+    pub(super) t: f64,
+    pub(super) en: [f64; 2],
+    pub(super) alt: Option<f64>,
+    /// Odometer distance from the start (m).
+    pub(super) s: f64,
+    /// Integrated gyro per logged axis (units as labelled x s).
+    pub(super) turn: [f64; 3],
+    /// Mean acceleration since the previous fix, per logged axis.
+    pub(super) acc: Option<[f64; 3]>,
+}
+
+pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
+    let Some(first) = log.fix.iter().flatten().next() else {
+        return Vec::new();
+    };
+    let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
+    let dist =
+        crate::signals::odometer_distance(log).map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
+    let mut s = 0.0;
+    let mut turn = [0.0; 3];
+    let mut acc_sum = [0.0; 3];
+    let mut acc_n = 0usize;
+    let mut out = Vec::new();
+    for j in 0..log.len() {
+        if j > 0 {
+            let dt = log.t_s[j] - log.t_s[j - 1];
+            s += dist[j];
+            for a in 0..3 {
+                turn[a] += log.gyro_dps[j][a] * dt;
+            }
+        }
+        if let Some(Some(acc)) = log.accel_mps2.as_ref().map(|v| v[j]) {
+            for a in 0..3 {
+                acc_sum[a] += acc[a];
+            }
+            acc_n += 1;
+        }
+        if let Some((lat, lon)) = log.fix[j] {
+            let enu = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
+            out.push(AtFix {
+                t: log.t_s[j],
+                en: [enu.x, enu.y],
+                alt: log.gps_alt_m.as_ref().and_then(|a| a[j]),
+                s,
+                turn,
+                acc: (acc_n > 0).then(|| acc_sum.map(|x| x / acc_n as f64)),
+            });
+            acc_sum = [0.0; 3];
+            acc_n = 0;
+        }
+    }
+    out
+}
+
+/// Stretches of the track: indices of fixes at least [`STRETCH_M`] apart along the odometer.
+pub(super) fn stretches(fixes: &[AtFix]) -> Vec<usize> {
+    stretches_of(fixes, STRETCH_M)
+}
+
+/// Indices of fixes at least `length` (m) apart along the odometer.
+pub(super) fn stretches_of(fixes: &[AtFix], length: f64) -> Vec<usize> {
+    let mut idx = Vec::new();
+    let mut last = f64::NEG_INFINITY;
+    for (k, f) in fixes.iter().enumerate() {
+        if f.s - last >= length || idx.is_empty() {
+            idx.push(k);
+            last = f.s;
+        }
+    }
+    idx
+}
+
+/// Stretches for the odometer check are at least this many times the fixes'
+/// own scatter long: a chord `L` between two fixes with errors of scatter `s`
+/// reads about `sqrt(L^2 + 2 s^2)`, so city fixes 10-20 m off made 15 m
+/// stretches of GPS track 40 % longer than the road (Berlin read 0.728 m of
+/// odometer per GPS m); at `L = 10 s` the excess is 1 %.
+pub(super) const STRETCH_PER_SCATTER: f64 = 10.0;
+
+/// Odometer distance against the GPS track length, over stretches that moved.
+pub(super) fn odometer_scale(fixes: &[AtFix], report: &mut CheckReport) {
+    let t: Vec<f64> = fixes.iter().map(|f| f.t).collect();
+    let en: Vec<[f64; 2]> = fixes.iter().map(|f| f.en).collect();
+    let scatter = crate::statistics::track_scatter_m(&t, &en).unwrap_or(0.0);
+    let idx = stretches_of(fixes, STRETCH_M.max(STRETCH_PER_SCATTER * scatter));
+    let (mut odo, mut gps) = (0.0, 0.0);
+    for w in idx.windows(2) {
+        let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
+        odo += b.s - a.s;
+        gps += ((b.en[0] - a.en[0]).powi(2) + (b.en[1] - a.en[1]).powi(2)).sqrt();
+    }
+    let total_odo = fixes.last().map_or(0.0, |f| f.s);
+    if total_odo < 0.0 && total_odo.abs() > 10.0 {
+        report.say(
+            "odometer",
+            Level::Problem,
+            format!(
+                "the odometer runs backwards ({total_odo:.0} m in all) while the GPS moves: its sign is flipped"
+            ),
+        );
+        return;
+    }
+    if gps < 50.0 {
+        report.say(
+            "odometer",
+            Level::Info,
+            format!("scale not checked: the GPS track is only {gps:.0} m long"),
+        );
+        return;
+    }
+    let ratio = odo / gps;
+    report.odometer_per_gps = Some(ratio);
+    let (level, note) = if (0.85..=1.15).contains(&ratio) {
+        (Level::Ok, String::new())
+    } else if (ratio * 3.6 - 1.0).abs() < 0.15 {
+        (Level::Problem, ": km/h logged as m/s?".into())
+    } else if (ratio / 3.6 - 1.0).abs() < 0.15 {
+        (Level::Problem, ": m/s logged as km/h?".into())
+    } else {
+        (
+            Level::Warning,
+            ": more than a wrong circumference explains; check the odometer's units".into(),
+        )
+    };
+    report.say(
+        "odometer",
+        level,
+        format!(
+            "it measures {ratio:.3} m per metre of GPS track ({odo:.0} m against {gps:.0} m){note}"
+        ),
+    );
+}
+
+/// The altitude's datum cannot be told from the data; a jump in it can.
+pub(super) fn altitude(log: &RideLog, fixes: &[AtFix], report: &mut CheckReport) {
+    if log.gps_alt_m.is_none() {
+        return;
+    }
+    let jump = fixes
+        .windows(2)
+        .filter_map(|w| Some((w[1].t, (w[1].alt? - w[0].alt?).abs(), w[1].t - w[0].t)))
+        .filter(|&(_, d, dt)| dt <= 2.0 && d > 15.0)
+        .max_by(|a, b| a.1.total_cmp(&b.1));
+    match jump {
+        Some((t, d, _)) => report.say(
+            "GPS altitude",
+            Level::Warning,
+            format!(
+                "jumps by {d:.0} m at t = {t:.1} s: a datum switch or a bad fix; the vertical fit there is off"
+            ),
+        ),
+        None => report.say(
+            "GPS altitude",
+            Level::Info,
+            "above the WGS84 ellipsoid or above mean sea level (many receivers and ROS drivers write MSL) cannot be told from the data; the two differ by a constant (the geoid height, -106 to +85 m), which is harmless: gyropath uses altitudes relative to the first fix".into(),
+        ),
+    }
+}
