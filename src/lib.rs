@@ -30,6 +30,7 @@ pub mod import;
 pub mod limits;
 pub mod model;
 pub mod optimisation;
+pub mod pipeline;
 pub mod ride;
 pub mod rotation;
 pub mod signals;

@@ -16,13 +16,12 @@ use crate::diagnosis::{
     Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
     fix_residuals, held_out_rms, segment_biases,
 };
-use crate::export::{
-    FitReport, write_atomically, write_json, write_path_csv, write_path_gpx, write_path_tum,
-};
+use crate::export::{write_atomically, write_json, write_path_csv, write_path_gpx, write_path_tum};
 use crate::import::ReferenceTrack;
 use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
 use crate::model::{Model, PathAt};
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
+use crate::pipeline;
 use crate::signals::Signals;
 
 /// At most this many path points go to the UI per snapshot.
@@ -389,16 +388,16 @@ impl Worker {
     fn load(&mut self, source: RideSource) {
         self.send(Update::Loading(source.name()));
         let imported = match &source {
-            RideSource::Path(p, options) => import::open(p, options),
+            RideSource::Path(p, options) => pipeline::open(p, options),
             RideSource::Bytes { name, bytes } => import::parse(bytes, name)
                 .map(|log| import::checked(log, SourceKind::RideCsv, None, &MountChoice::Default)),
         };
         let (signals, origin) = match imported.map_err(|e| e.to_string()).and_then(|im| {
             let origin = Origin::of(&im);
-            let s = im.into_signals().map_err(|e| e.to_string())?;
+            let s = pipeline::signals(im).map_err(|e| e.to_string())?;
             Ok((s, origin))
         }) {
-            Ok((s, o)) => (Arc::new(s), o),
+            Ok(v) => v,
             Err(e) => {
                 self.send(Update::LoadFailed(e));
                 return;
@@ -426,12 +425,7 @@ impl Worker {
             ));
             return;
         };
-        let loaded = import::read_reference(path)
-            .map_err(|e| e.to_string())
-            .and_then(|r| {
-                let m = reference::match_rows(&ride.signals, &r).map_err(|e| e.to_string())?;
-                Ok((r, m))
-            });
+        let loaded = pipeline::reference_for(path, &ride.signals).map_err(|e| e.to_string());
         let (track, matched) = match loaded {
             Ok(v) => v,
             Err(e) => {
@@ -614,7 +608,8 @@ impl Worker {
                 write_atomically(path, protect, |w| write_path_tum(w, model, fit.params()))
             }
             ExportKind::ReportJson => {
-                let report = FitReport::new(fit, 0.0);
+                // The command line's report: sigmas, and the reference when one is loaded.
+                let (report, _) = pipeline::report(fit, 0.0, false, ride.reference.as_deref());
                 write_atomically(path, protect, |w| write_json(w, &report))
             }
         };

@@ -113,23 +113,17 @@ fn fit_one(
     reference: Option<&Path>,
 ) -> Result<FitReport> {
     let started = Instant::now();
-    let reference = reference_for(ride, reference)
-        .map(|p| gyropath::import::read_reference(&p))
-        .transpose()?;
-    let signals = Arc::new(load_signals(ride, source, true)?);
-    let against = matched_reference(reference, &signals)?;
+    let signals = load_signals(ride, source, true)?;
+    let against = matched_reference(reference_for(ride, reference).as_deref(), &signals)?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;
-    let uncertainty = fit.model().uncertainty(fit.params());
-    let elapsed = started.elapsed().as_secs_f64();
-    let mut report = match &uncertainty {
-        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
-        None => FitReport::new(&fit, elapsed),
-    };
-    if let Some((r, m)) = &against {
-        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
-    }
+    let (report, uncertainty) = pipeline::report(
+        &fit,
+        started.elapsed().as_secs_f64(),
+        true,
+        against.as_ref(),
+    );
     if let Some(dir) = out_dir {
         write_path(
             &dir.join(format!("{stem}-path.csv")),

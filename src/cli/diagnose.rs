@@ -52,18 +52,13 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
     if !(args.block_s.is_finite() && args.block_s >= 5.0) {
         anyhow::bail!("--block-s must be at least 5 s, got {}", args.block_s);
     }
-    let reference = args
-        .reference
-        .as_deref()
-        .map(gyropath::import::read_reference)
-        .transpose()?;
-    let signals = Arc::new(load_signals(&args.ride, &args.source, args.quiet)?);
+    let signals = load_signals(&args.ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
         }
     }
-    let against = matched_reference(reference, &signals)?;
+    let against = matched_reference(args.reference.as_deref(), &signals)?;
     let folds = Folds {
         block_s: args.block_s,
         k: args.folds,

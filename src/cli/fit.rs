@@ -87,18 +87,13 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         anyhow::bail!("--out and --json cannot both go to standard output");
     }
     let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.json);
-    let reference = args
-        .reference
-        .as_deref()
-        .map(gyropath::import::read_reference)
-        .transpose()?;
-    let signals = Arc::new(load_signals(ride, &args.source, args.quiet)?);
+    let signals = load_signals(ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
         }
     }
-    let against = matched_reference(reference, &signals)?;
+    let against = matched_reference(args.reference.as_deref(), &signals)?;
     let mut fit = Reconstruction::new(signals, settings)?;
     let terminal = std::io::stderr().is_terminal() && !args.quiet;
     let bar = terminal.then(|| {
@@ -119,17 +114,12 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         b.finish_and_clear();
     }
     physical(&fit)?;
-    let uncertainty = (args.out.is_some() || args.json.is_some())
-        .then(|| fit.model().uncertainty(fit.params()))
-        .flatten();
-    let elapsed = started.elapsed().as_secs_f64();
-    let mut report = match &uncertainty {
-        Some(u) => FitReport::with_uncertainty(&fit, elapsed, u),
-        None => FitReport::new(&fit, elapsed),
-    };
-    if let Some((r, m)) = &against {
-        report.reference = Some(reference::compare(fit.model(), fit.params(), r, m));
-    }
+    let (report, uncertainty) = pipeline::report(
+        &fit,
+        started.elapsed().as_secs_f64(),
+        args.out.is_some() || args.json.is_some(),
+        against.as_ref(),
+    );
     if let (Some(out), Some(format)) = (&args.out, path_format) {
         write_path(out, format, ride, &fit, uncertainty.as_ref())?;
     }

@@ -11,17 +11,17 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use gyropath::diagnosis::{Diagnosis, Folds, reference};
+use gyropath::diagnosis::{Diagnosis, Folds};
 use gyropath::export::{
     FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
     write_path_csv, write_path_gpx, write_path_tum,
 };
-use gyropath::import::{ImportOptions, Imported, Level, MountChoice, ReferenceTrack, TopicChoice};
-use gyropath::limits;
+use gyropath::import::{ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
 use gyropath::optimisation::{
     AutoNoise, FitSettings, IterationReport, Method, Phase, Reconstruction,
 };
+use gyropath::pipeline;
 use gyropath::signals::Signals;
 use gyropath::simulation::{self, SimConfig};
 
@@ -282,12 +282,12 @@ impl SettingsArgs {
 
 /// Read any input, say where it came from and what the checks found (unless
 /// quiet), and derive its signals.
-pub fn load_signals(path: &Path, source: &SourceArgs, quiet: bool) -> Result<Signals> {
-    let imported = gyropath::import::open(path, &source.options()?)?;
+pub fn load_signals(path: &Path, source: &SourceArgs, quiet: bool) -> Result<Arc<Signals>> {
+    let imported = pipeline::open(path, &source.options()?)?;
     if !quiet {
         describe_source(&imported);
     }
-    Ok(imported.into_signals()?)
+    Ok(pipeline::signals(imported)?)
 }
 
 /// One or two lines on stderr: what was read, from which topics, mounted how.
@@ -316,35 +316,22 @@ fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Resu
 /// A fit beyond the physical limits is a failure, with its likely cause,
 /// never a result (see `gyropath::limits`).
 fn physical(fit: &Reconstruction) -> Result<()> {
-    let broken = limits::check(fit.model(), fit.params());
-    if broken.is_empty() {
-        return Ok(());
+    match pipeline::judge(fit.model(), fit.params())
+        .failure(&fit.model().signals.source, fit.stats().rms_horizontal_m)
+    {
+        Some(message) => anyhow::bail!(message),
+        None => Ok(()),
     }
-    let lines: Vec<String> = broken.iter().map(|v| format!("  {v}")).collect();
-    anyhow::bail!(
-        "{}: the fit failed: it is {} (its path is {:.2} m RMS from the fixes):\n{}",
-        fit.model().signals.source,
-        if limits::parameters(fit.model(), fit.params()).is_empty() {
-            "no result"
-        } else {
-            "not physical"
-        },
-        fit.stats().rms_horizontal_m,
-        lines.join("\n")
-    )
 }
 
 /// Match a reference track (read before the ride, so that a bad file fails
 /// before a long load) to the ride's rows: one of another drive fails here,
 /// before the fit.
 fn matched_reference(
-    reference: Option<ReferenceTrack>,
+    reference: Option<&Path>,
     signals: &Signals,
-) -> Result<Option<(ReferenceTrack, reference::Matched)>> {
-    reference
-        .map(|r| {
-            let m = reference::match_rows(signals, &r)?;
-            Ok((r, m))
-        })
-        .transpose()
+) -> Result<Option<pipeline::MatchedReference>> {
+    Ok(reference
+        .map(|p| pipeline::reference_for(p, signals))
+        .transpose()?)
 }

@@ -1,0 +1,154 @@
+//! The journey of one fit, the same for every front end: open the source
+//! and derive its signals, match a reference track to it, fit, judge the
+//! fit against the physical limits, and make its report. The command line
+//! (`fit`, a batch, `diagnose`) and the app's worker each call these steps,
+//! so a change to the journey (what a report holds, when a fit is no
+//! result) is made once, here.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::diagnosis::reference::{self, Matched, ReferenceError};
+use crate::export::FitReport;
+use crate::import::{self, ImportOptions, Imported, LoadError, ReferenceTrack};
+use crate::limits::{self, Violation};
+use crate::model::{Model, Uncertainty};
+use crate::optimisation::Reconstruction;
+use crate::signals::Signals;
+
+/// A reference track and the ride's rows it covers.
+pub type MatchedReference = (ReferenceTrack, Matched);
+
+/// Open any input `gyropath` reads (ride log, bag, mapped CSV), checked.
+pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError> {
+    import::open(path, options)
+}
+
+/// Read a reference track and match it to `signals`' rows: an error when it
+/// cannot belong to the ride (no time in common, far from every fix).
+pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference, PipelineError> {
+    let track = import::read_reference(path)?;
+    let matched = reference::match_rows(signals, &track)?;
+    Ok((track, matched))
+}
+
+/// Why a step of the journey failed.
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    #[error(transparent)]
+    Load(#[from] LoadError),
+    #[error(transparent)]
+    Reference(#[from] ReferenceError),
+    #[error(transparent)]
+    Signals(#[from] crate::signals::SignalError),
+}
+
+/// What a finished fit is: a result, or a failure with its reasons.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Judgement {
+    /// Within every physical limit: a result.
+    Result,
+    /// The parameters are physical but the path does not follow the fixes
+    /// (see [`limits::path_far_from_fixes`]): no result.
+    NoResult(Vec<Violation>),
+    /// A parameter no real vehicle has (a negative gain, an upside-down
+    /// sensor): the axes or units are the likely fault.
+    NotPhysical(Vec<Violation>),
+}
+
+impl Judgement {
+    /// The limits the fit breaks (none for a result).
+    pub fn violations(&self) -> &[Violation] {
+        match self {
+            Self::Result => &[],
+            Self::NoResult(v) | Self::NotPhysical(v) => v,
+        }
+    }
+
+    /// The failure in one message, naming the ride, or `None` for a result:
+    /// "ride.csv: the fit failed: it is not physical (its path is 3.1 m RMS
+    /// from the fixes):" and one line per broken limit.
+    pub fn failure(&self, source: &str, rms_horizontal_m: f64) -> Option<String> {
+        let what = match self {
+            Self::Result => return None,
+            Self::NoResult(_) => "no result",
+            Self::NotPhysical(_) => "not physical",
+        };
+        let lines: Vec<String> = self.violations().iter().map(|v| format!("  {v}")).collect();
+        Some(format!(
+            "{source}: the fit failed: it is {what} (its path is {rms_horizontal_m:.2} m RMS from the fixes):\n{}",
+            lines.join("\n")
+        ))
+    }
+}
+
+/// Judge the fit of `model` at `theta` against the physical limits.
+pub fn judge(model: &Model, theta: &[f64]) -> Judgement {
+    let broken = limits::check(model, theta);
+    if broken.is_empty() {
+        Judgement::Result
+    } else if limits::parameters(model, theta).is_empty() {
+        Judgement::NoResult(broken)
+    } else {
+        Judgement::NotPhysical(broken)
+    }
+}
+
+/// The report of a finished fit: its parameters with their sigmas (and the
+/// path's uncertainty, returned for the path file, when `with_path_sigma`),
+/// measured against the reference track when one is given.
+pub fn report(
+    fit: &Reconstruction,
+    elapsed_s: f64,
+    with_path_sigma: bool,
+    reference: Option<&MatchedReference>,
+) -> (FitReport, Option<Uncertainty>) {
+    let uncertainty = with_path_sigma
+        .then(|| fit.model().uncertainty(fit.params()))
+        .flatten();
+    let mut report = match &uncertainty {
+        Some(u) => FitReport::with_uncertainty(fit, elapsed_s, u),
+        None => FitReport::new(fit, elapsed_s),
+    };
+    if let Some((track, matched)) = reference {
+        report.reference = Some(reference::compare(
+            fit.model(),
+            fit.params(),
+            track,
+            matched,
+        ));
+    }
+    (report, uncertainty)
+}
+
+/// The signals of an opened input, shared between the fit and its checks.
+pub fn signals(imported: Imported) -> Result<Arc<Signals>, PipelineError> {
+    Ok(Arc::new(imported.into_signals()?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::ModelSpec;
+
+    #[test]
+    fn a_broken_limit_is_a_failure_that_says_which_kind() {
+        let sig = Arc::new(crate::testing::simulated_signals(3, 240.0, &[]));
+        let model = Model::new(sig, ModelSpec::default()).unwrap();
+        let mut theta = model.initial_params();
+        assert_eq!(judge(&model, &theta), Judgement::Result);
+        assert!(Judgement::Result.failure("r.csv", 1.0).is_none());
+        let gain = model
+            .range(model.effect_index("odometer_gain").unwrap())
+            .start;
+        theta[gain] = -1.0;
+        let j = judge(&model, &theta);
+        assert!(matches!(j, Judgement::NotPhysical(_)), "{j:?}");
+        let message = j.failure("r.csv", 3.25).unwrap();
+        assert!(
+            message.starts_with("r.csv: the fit failed: it is not physical (its path is 3.25 m"),
+            "{message}"
+        );
+        assert!(message.contains("odometer gain"), "{message}");
+    }
+}
