@@ -441,12 +441,20 @@ pub struct BiasTotal {
     pub min_dps: f64,
     pub max_dps: f64,
     pub segments: usize,
+    /// How well the bias at any moment is known: the median over segments
+    /// of a segment's 1-sigma (deg/s; `null` when not computed).
+    pub sigma_per_segment_dps: Option<f64>,
 }
 
 impl BiasTotal {
-    /// Per axis, from the bias per segment (`diagnosis::segment_biases`);
+    /// Per axis, from the bias per segment (`diagnosis::segment_biases`) and
+    /// their 1-sigma (`diagnosis::segment_sigmas`, same length, or empty);
     /// `fitted[a]` says whether axis `a` is estimated at all.
-    pub fn of(segments: &[crate::diagnosis::SegmentBias], fitted: [bool; 3]) -> [Option<Self>; 3] {
+    pub fn of(
+        segments: &[crate::diagnosis::SegmentBias],
+        sigmas: &[[f64; 3]],
+        fitted: [bool; 3],
+    ) -> [Option<Self>; 3] {
         [0, 1, 2].map(|a| {
             let span: f64 = segments.iter().map(|s| s.t1 - s.t0).sum();
             (fitted[a] && !segments.is_empty() && span > 0.0).then(|| Self {
@@ -464,19 +472,35 @@ impl BiasTotal {
                     .map(|s| s.bias_dps[a])
                     .fold(f64::NEG_INFINITY, f64::max),
                 segments: segments.len(),
+                sigma_per_segment_dps: {
+                    let mut s: Vec<f64> = sigmas
+                        .iter()
+                        .map(|v| v[a])
+                        .filter(|v| v.is_finite())
+                        .collect();
+                    (!s.is_empty() && s.len() == segments.len())
+                        .then(|| crate::statistics::median(&mut s))
+                },
             })
         })
     }
 
-    /// "0.053 deg/s (0.041 to 0.089 over 57 segments)".
+    /// "0.0530 deg/s (0.0410 to 0.0890 over 57 segments), 1-sigma 0.0040 per segment".
     pub fn describe(&self) -> String {
+        let sigma = self.sigma_per_segment_dps.map_or(String::new(), |s| {
+            if self.segments > 1 {
+                format!(", 1-sigma {s:.4} per segment")
+            } else {
+                format!(" ± {s:.4}")
+            }
+        });
         if self.segments > 1 {
             format!(
-                "{:.4} deg/s ({:.4} to {:.4} over {} segments)",
+                "{:.4} deg/s ({:.4} to {:.4} over {} segments){sigma}",
                 self.mean_dps, self.min_dps, self.max_dps, self.segments
             )
         } else {
-            format!("{:.4} deg/s", self.mean_dps)
+            format!("{:.4} deg/s{sigma}", self.mean_dps)
         }
     }
 }
@@ -499,6 +523,7 @@ impl FitReport {
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
         let fixed = model.fixed_mask();
         let fixed_mask = fixed.clone();
+        let sigmas_for_bias = sigmas.clone();
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -547,6 +572,7 @@ impl FitReport {
                 });
                 BiasTotal::of(
                     &crate::diagnosis::segment_biases(model, fit.params()),
+                    &crate::diagnosis::segment_sigmas(model, &sigmas_for_bias),
                     fitted,
                 )
             },

@@ -762,6 +762,14 @@ fn the_summary_gives_the_bias_the_sensor_had_not_only_its_constant_part() {
     let mean = z["mean_dps"].as_f64().unwrap();
     assert!((0.04..0.09).contains(&mean), "{z}");
     assert!(z["min_dps"].as_f64().unwrap() <= mean && mean <= z["max_dps"].as_f64().unwrap());
+    // With its 1-sigma, as every other parameter: a segment's, which is the
+    // total bias's over it (step 2 holds the constant part).
+    let sigma = z["sigma_per_segment_dps"].as_f64().unwrap();
+    assert!((0.001..0.1).contains(&sigma), "{z}");
+    assert!(
+        text.contains(&format!("1-sigma {sigma:.4} per segment")),
+        "{text}"
+    );
     assert!(
         r["bias_total"][0].is_null(),
         "a yaw-rate sensor has no roll bias"

@@ -754,18 +754,10 @@ fn segment_sigmas(
     u: &crate::model::Uncertainty,
     n: usize,
 ) -> Vec<[f64; 3]> {
-    let Some(e) = model.effect_index("gyro_bias_segments") else {
-        return Vec::new();
-    };
-    let r = model.range(e);
-    if r.len() != 3 * n {
-        return Vec::new();
+    let sigmas = crate::diagnosis::segment_sigmas(model, &u.params);
+    if sigmas.len() == n {
+        sigmas
+    } else {
+        Vec::new()
     }
-    (0..n)
-        .map(|s| {
-            [0, 1, 2].map(|a| {
-                u.params[r.start + 3 * s + a].map_or(f64::NAN, |v| v * crate::effects::DEG_PER_RAD)
-            })
-        })
-        .collect()
 }

@@ -31,6 +31,31 @@ pub struct SegmentBias {
     pub bias_dps: [f64; 3],
 }
 
+/// The 1-sigma (deg/s, per axis) of the bias of every entry of
+/// [`segment_biases`], from the parameters' sigmas (internal units, `None`
+/// where not free; NaN then). Step 2 holds the constant part and fits the
+/// segments, so a segment's sigma is that of the total bias over it; without
+/// segments it is the constant's.
+pub fn segment_sigmas(model: &Model, sigmas: &[Option<f64>]) -> Vec<[f64; 3]> {
+    let axis = |i: usize| {
+        sigmas
+            .get(i)
+            .copied()
+            .flatten()
+            .map_or(f64::NAN, |v| v * DEG_PER_RAD)
+    };
+    if let Some(e) = model.effect_index("gyro_bias_segments") {
+        let r = model.range(e);
+        return (0..r.len() / 3)
+            .map(|s| [0, 1, 2].map(|a| axis(r.start + 3 * s + a)))
+            .collect();
+    }
+    match model.effect_index("gyro_bias") {
+        Some(e) => vec![[0, 1, 2].map(|a| axis(model.range(e).start + a))],
+        None => vec![[f64::NAN; 3]],
+    }
+}
+
 /// The bias the model subtracts from the gyro, per segment: `b + b_s` of the
 /// paper's model. Without segments it is one stretch over the whole ride.
 pub fn segment_biases(model: &Model, theta: &[f64]) -> Vec<SegmentBias> {
