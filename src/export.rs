@@ -14,12 +14,10 @@ use crate::optimisation::{FitSettings, FitStats, Reconstruction};
 
 #[derive(Debug, Error)]
 pub enum ExportError {
-    #[error("{path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The OS's reason is part of the message, not a chained source, so
+    /// that a chain printer (anyhow's `{:#}`) says it once.
+    #[error("{path}: cannot write: {error}")]
+    Io { path: String, error: std::io::Error },
     #[error("{0}: refusing to write over the input log")]
     WouldOverwriteInput(String),
     #[error("{path}: unknown {what} format; write {choices}")]
@@ -46,9 +44,9 @@ pub fn write_atomically(
     protect: Option<&Path>,
     fill: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
 ) -> Result<(), ExportError> {
-    let io = |source| ExportError::Io {
+    let io = |error| ExportError::Io {
         path: path.display().to_string(),
-        source,
+        error,
     };
     if is_stdout(path) {
         let mut out = std::io::stdout().lock();

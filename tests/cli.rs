@@ -980,3 +980,38 @@ fn a_bad_absolute_time_in_a_log_is_an_error_naming_it() {
         "{err}"
     );
 }
+
+#[test]
+fn an_error_says_whether_the_input_or_the_output_failed_and_says_it_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "55", "", "60");
+    let missing = dir.path().join("no/such/folder/p.csv");
+    for (args, says) in [
+        (
+            vec!["fit", s(&ride), "--quiet", "--out", s(&missing)],
+            "cannot write",
+        ),
+        (vec!["fit", "no-such-ride.csv"], "cannot read"),
+        (
+            vec![
+                "fit",
+                s(&ride),
+                "--quiet",
+                "--reference",
+                "no-such-truth.csv",
+            ],
+            "cannot read",
+        ),
+    ] {
+        let out = gyropath(&args);
+        assert_eq!(out.status.code(), Some(1));
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert_eq!(
+            err.matches("No such file or directory").count(),
+            1,
+            "{args:?}: {err}"
+        );
+    }
+}

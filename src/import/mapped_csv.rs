@@ -122,9 +122,9 @@ pub struct GpsMap {
 /// Read a column map.
 pub fn read_map(path: &Path) -> Result<ColumnMap, LoadError> {
     let file = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| LoadError::Io {
+    let text = std::fs::read_to_string(path).map_err(|error| LoadError::Io {
         file: file.clone(),
-        source,
+        error,
     })?;
     toml::from_str(&text).map_err(|e| LoadError::File {
         file,
@@ -144,9 +144,9 @@ impl Table {
     /// Read the columns `wanted` (every one must exist) of the CSV at `path`.
     fn read(path: &Path, wanted: &[&str]) -> Result<Self, LoadError> {
         let file = path.display().to_string();
-        let f = std::fs::File::open(path).map_err(|source| LoadError::Io {
+        let f = std::fs::File::open(path).map_err(|error| LoadError::Io {
             file: file.clone(),
-            source,
+            error,
         })?;
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)

@@ -33,12 +33,10 @@ pub use timeline::{TopicChoice, TopicInfo, Topics};
 /// Why an input could not be loaded.
 #[derive(Debug, Error)]
 pub enum LoadError {
-    #[error("{file}: cannot read: {source}")]
-    Io {
-        file: String,
-        #[source]
-        source: std::io::Error,
-    },
+    /// The OS's reason is part of the message, not a chained source, so
+    /// that a chain printer (anyhow's `{:#}`) says it once.
+    #[error("{file}: cannot read: {error}")]
+    Io { file: String, error: std::io::Error },
     #[error("{file}:{line}: column '{column}': {message}")]
     Field {
         file: String,
@@ -181,9 +179,9 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
     let mut head = [0u8; 13];
     let n = std::fs::File::open(path)
         .and_then(|mut f| ros1::read_full(&mut f, &mut head))
-        .map_err(|source| LoadError::Io {
+        .map_err(|error| LoadError::Io {
             file: path.display().to_string(),
-            source,
+            error,
         })?;
     let head = &head[..n];
     let ext = path

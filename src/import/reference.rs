@@ -28,9 +28,9 @@ pub struct ReferenceTrack {
 /// Read a reference track (see the module documentation).
 pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
     let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|source| LoadError::Io {
+    let bytes = std::fs::read(path).map_err(|error| LoadError::Io {
         file: file.clone(),
-        source,
+        error,
     })?;
     parse_reference(&bytes, &file)
 }

@@ -16,9 +16,9 @@ use super::{LoadError, RideLog};
 
 /// Load a ride log from a file.
 pub fn load_file(path: &Path) -> Result<RideLog, LoadError> {
-    let file = std::fs::File::open(path).map_err(|source| LoadError::Io {
+    let file = std::fs::File::open(path).map_err(|error| LoadError::Io {
         file: path.display().to_string(),
-        source,
+        error,
     })?;
     parse_reader(
         std::io::BufReader::with_capacity(1 << 20, file),

@@ -28,9 +28,9 @@ const OP_CONNECTION: u8 = 0x07;
 /// Read the bag at `path`: the messages of every topic gyropath can use.
 pub fn read(path: &Path, choice: &TopicChoice) -> Result<(Recording, Topics), LoadError> {
     let file = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|source| LoadError::Io {
+    let f = std::fs::File::open(path).map_err(|error| LoadError::Io {
         file: file.clone(),
-        source,
+        error,
     })?;
     read_from(BufReader::with_capacity(1 << 20, f), &file, choice)
 }
@@ -115,18 +115,18 @@ impl Bag<'_> {
             Ok(0) => return Ok(false),
             Ok(4) => {}
             Ok(_) => return Err(self.truncated()),
-            Err(source) => {
+            Err(error) => {
                 return Err(LoadError::Io {
                     file: self.file.to_string(),
-                    source,
+                    error,
                 });
             }
         }
         self.read_block(input, u32::from_le_bytes(len) as usize, header)?;
         let mut len = [0u8; 4];
-        if read_full(input, &mut len).map_err(|source| LoadError::Io {
+        if read_full(input, &mut len).map_err(|error| LoadError::Io {
             file: self.file.to_string(),
-            source,
+            error,
         })? != 4
         {
             return Err(self.truncated());
@@ -150,9 +150,9 @@ impl Bag<'_> {
             .by_ref()
             .take(n as u64)
             .read_to_end(out)
-            .map_err(|source| LoadError::Io {
+            .map_err(|error| LoadError::Io {
                 file: self.file.to_string(),
-                source,
+                error,
             })?;
         if got != n {
             return Err(self.truncated());

@@ -30,9 +30,9 @@ pub fn read(path: &Path, choice: &TopicChoice) -> Result<(Recording, Topics), Lo
     let mut rec = Recording::new(&source);
     for f in &files {
         let file = f.display().to_string();
-        let input = std::fs::File::open(f).map_err(|source| LoadError::Io {
+        let input = std::fs::File::open(f).map_err(|error| LoadError::Io {
             file: file.clone(),
-            source,
+            error,
         })?;
         read_mcap(
             std::io::BufReader::with_capacity(1 << 20, input),
@@ -77,9 +77,9 @@ fn storage_files(dir: &Path) -> Result<Vec<PathBuf>, LoadError> {
         }
     }
     if files.is_empty() {
-        let listed = std::fs::read_dir(dir).map_err(|source| LoadError::Io {
+        let listed = std::fs::read_dir(dir).map_err(|error| LoadError::Io {
             file: folder.clone(),
-            source,
+            error,
         })?;
         files = listed
             .filter_map(|e| e.ok().map(|e| e.path()))
@@ -178,10 +178,10 @@ pub fn read_mcap(
                     match input.read(buf) {
                         Ok(n) => break n,
                         Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                        Err(source) => {
+                        Err(error) => {
                             return Err(LoadError::Io {
                                 file: file.to_string(),
-                                source,
+                                error,
                             });
                         }
                     }
