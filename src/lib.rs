@@ -24,6 +24,7 @@ pub mod app;
 pub mod contract;
 pub mod diagnosis;
 pub mod effects;
+pub mod explain;
 pub mod export;
 pub mod geodesy;
 pub mod import;

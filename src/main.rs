@@ -10,6 +10,7 @@ fn main() {
         Some(cli::Command::Fit(a)) => cli::fit(a),
         Some(cli::Command::Simulate(a)) => cli::simulate(a),
         Some(cli::Command::Diagnose(a)) => cli::diagnose(a),
+        Some(cli::Command::Explain(a)) => cli::explain(a),
         Some(cli::Command::Import(a)) => cli::import(a),
         Some(cli::Command::Check(a)) => cli::check(a),
         Some(cli::Command::Open(a)) => match &a.ride {

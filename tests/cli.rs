@@ -818,7 +818,9 @@ fn open_without_a_file_opens_the_sample_as_its_help_says() {
 
 #[test]
 fn every_subcommands_help_has_an_example() {
-    for sub in ["fit", "diagnose", "simulate", "import", "check", "open"] {
+    for sub in [
+        "fit", "diagnose", "explain", "simulate", "import", "check", "open",
+    ] {
         let out = gyropath(&[sub, "--help"]);
         assert!(out.status.success(), "{sub}");
         let text = String::from_utf8_lossy(&out.stdout);
@@ -1014,4 +1016,89 @@ fn an_error_says_whether_the_input_or_the_output_failed_and_says_it_once() {
             "{args:?}: {err}"
         );
     }
+}
+
+#[test]
+fn explain_runs_the_whole_loop_and_its_model_carries_to_the_next_fit() {
+    let comma = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    );
+    let truth = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/truth.csv"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let (path, json, model) = (
+        dir.path().join("p.csv"),
+        dir.path().join("e.json"),
+        dir.path().join("sensor.json"),
+    );
+    let out = gyropath(&[
+        "explain",
+        comma,
+        "--reference",
+        truth,
+        "--out",
+        s(&path),
+        "--json",
+        s(&json),
+        "--save-model",
+        s(&model),
+        "--quiet",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{text}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].starts_with("base      "), "{text}");
+    assert!(lines[1].starts_with("added     gps_lag (lag 0.0"), "{text}");
+    assert!(
+        lines[2].starts_with("answer    the paper's model + gps_lag: nothing more"),
+        "{text}"
+    );
+    // Every step as JSON, with the reference error falling.
+    let e: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert_eq!(e["ending"]["kind"], "nothing_significant");
+    let steps = e["steps"].as_array().unwrap();
+    assert_eq!(steps.len(), 2);
+    let to_ref = |i: usize| {
+        steps[i]["reference"]["horizontal"]["rms_m"]
+            .as_f64()
+            .unwrap()
+    };
+    assert!(
+        to_ref(1) < 0.6 && to_ref(1) < to_ref(0),
+        "{} -> {}",
+        to_ref(0),
+        to_ref(1)
+    );
+    assert!(steps[1]["estimate"]["lag"]["sigma"].as_f64().unwrap() > 0.0);
+    // The final model's path, as fit writes it.
+    assert!(
+        std::fs::read_to_string(&path)
+            .unwrap()
+            .contains("t_s,lat_deg,lon_deg,alt_m")
+    );
+    // The saved model starts the next fit with gps_lag.
+    let out = gyropath(&["fit", comma, "--model", s(&model), "--quiet", "--json", "-"]);
+    assert!(out.status.success());
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(
+        r["model"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|m| m == "gps_lag"),
+        "{}",
+        r["model"]
+    );
+    // A file that is no saved model is refused, naming it.
+    let out = gyropath(&["fit", comma, "--model", truth]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a model saved by"));
 }

@@ -1,7 +1,6 @@
 //! `gyropath fit` on several rides or a folder: every ride on all cores, outputs
 //! that never collide, and a summary table.
 
-use super::fit::write_path;
 use super::*;
 
 /// One line of the batch summary.
@@ -152,7 +151,7 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     }
-    let settings = args.settings.settings()?;
+    let settings = args.settings_with_model()?;
     let rides = collect_rides(&args.rides)?;
     let stems = output_stems(&rides)?;
     let started = Instant::now();

@@ -13,6 +13,11 @@ pub struct FitArgs {
     pub source: SourceArgs,
     #[command(flatten)]
     pub settings: SettingsArgs,
+    /// Start from a model saved by `gyropath explain --save-model`: its
+    /// effects and segment length (the GPS noise is estimated anew for each
+    /// ride); --effects adds to it. Example: `--model sensor.json`.
+    #[arg(long)]
+    pub model: Option<PathBuf>,
     /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
@@ -68,6 +73,25 @@ pub(super) fn progress_line(r: &IterationReport) -> String {
     )
 }
 
+impl FitArgs {
+    /// The settings, starting from `--model`'s effects when one is given.
+    pub(super) fn settings_with_model(&self) -> Result<FitSettings> {
+        let mut settings = self.settings.settings()?;
+        if let Some(path) = &self.model {
+            let saved = super::explain::load_model(path)?;
+            let mut effects = saved.effects;
+            for e in settings.model.effects.drain(..) {
+                if !effects.contains(&e) {
+                    effects.push(e);
+                }
+            }
+            settings.model.effects = effects;
+            settings.model.segment_s = saved.segment_s;
+        }
+        Ok(settings)
+    }
+}
+
 pub fn fit(args: &FitArgs) -> Result<()> {
     let folder_of_rides = args.rides[0].is_dir() && !args.rides[0].join("metadata.yaml").is_file();
     let batch = args.rides.len() > 1 || args.out_dir.is_some() || folder_of_rides;
@@ -76,7 +100,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     }
     let ride = &args.rides[0];
     let started = Instant::now();
-    let settings = args.settings.settings()?;
+    let settings = args.settings_with_model()?;
     // The outputs' names are checked before the fit, not after minutes of it.
     let path_format = args.out.as_deref().map(PathFormat::of).transpose()?;
     if let Some(rep) = &args.json {
@@ -136,31 +160,6 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         }
     }
     Ok(())
-}
-
-/// Write the fitted path to `out` in `format`.
-pub(super) fn write_path(
-    out: &Path,
-    format: PathFormat,
-    ride: &Path,
-    fit: &Reconstruction,
-    uncertainty: Option<&gyropath::model::Uncertainty>,
-) -> Result<()> {
-    match format {
-        PathFormat::Csv => write_atomically(out, Some(ride), |w| {
-            write_path_csv(w, fit.model(), fit.params(), uncertainty)
-        }),
-        PathFormat::Gpx => {
-            let trajectory = fit.trajectory();
-            write_atomically(out, Some(ride), |w| {
-                write_path_gpx(w, fit.model(), &trajectory)
-            })
-        }
-        PathFormat::Tum => write_atomically(out, Some(ride), |w| {
-            write_path_tum(w, fit.model(), fit.params())
-        }),
-    }
-    .context("the path could not be written")
 }
 
 /// Differences of `-2 ln L` below this are no evidence for one segment

@@ -28,12 +28,14 @@ use gyropath::simulation::{self, SimConfig};
 mod batch;
 mod check;
 mod diagnose;
+mod explain;
 mod fit;
 mod import;
 mod simulate;
 
 pub use check::{CheckArgs, check};
 pub use diagnose::{DiagnoseArgs, diagnose};
+pub use explain::{ExplainArgs, explain};
 pub use fit::{FitArgs, fit};
 pub use import::{ImportArgs, import};
 pub use simulate::{SimulateArgs, simulate};
@@ -67,6 +69,14 @@ pub enum Command {
     /// It starts with the answer and the command that adds the missing
     /// effect. Example: `gyropath diagnose ride.csv --reference truth.csv --json diagnosis.json`.
     Diagnose(DiagnoseArgs),
+    /// Find what the model lacks in one step: fit, diagnose, add the top
+    /// significant effect, refit, until nothing significant is left.
+    ///
+    /// Each step is told as it finishes (the effect, its estimate, the
+    /// held-out error and its drop, the error to a reference). Example:
+    /// `gyropath explain ride.csv --reference truth.csv --out path.csv --save-model sensor.json`;
+    /// then `gyropath fit next-ride.csv --model sensor.json`.
+    Explain(ExplainArgs),
     /// Open the app on a ride log or bag; without one, on the bundled sample ride.
     ///
     /// Example: `gyropath open ride.csv`, `gyropath open test1.bag --mount auto`.
@@ -334,4 +344,29 @@ fn matched_reference(
     Ok(reference
         .map(|p| pipeline::reference_for(p, signals))
         .transpose()?)
+}
+
+/// Write the fitted path to `out` in `format`.
+fn write_path(
+    out: &Path,
+    format: PathFormat,
+    ride: &Path,
+    fit: &Reconstruction,
+    uncertainty: Option<&gyropath::model::Uncertainty>,
+) -> Result<()> {
+    match format {
+        PathFormat::Csv => write_atomically(out, Some(ride), |w| {
+            write_path_csv(w, fit.model(), fit.params(), uncertainty)
+        }),
+        PathFormat::Gpx => {
+            let trajectory = fit.trajectory();
+            write_atomically(out, Some(ride), |w| {
+                write_path_gpx(w, fit.model(), &trajectory)
+            })
+        }
+        PathFormat::Tum => write_atomically(out, Some(ride), |w| {
+            write_path_tum(w, fit.model(), fit.params())
+        }),
+    }
+    .context("the path could not be written")
 }
