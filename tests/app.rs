@@ -538,3 +538,55 @@ fn a_reference_track_is_drawn_and_the_history_says_how_far_each_model_is_from_it
         .is_some_and(|e| e.contains("not of this ride"))));
     assert!(h.state().ride.is_some());
 }
+
+#[test]
+fn explain_adds_the_missing_effect_and_stops_when_nothing_more_is_significant() {
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .snapshot
+        .is_some()));
+    h.get_by_label("File").click();
+    h.run_steps(2);
+    h.get_by_label("Examples").hover();
+    h.run_steps(3);
+    h.get_by_label("GPS lag (simulated bicycle)").click();
+    assert!(step_until(&mut h, Duration::from_secs(60), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains("hidden-gps-lag"))
+        && a.snapshot.is_some()));
+    h.get_by_label("Explain").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(600), |a| a.explaining.is_none()
+            && a.explain_log.len() > 1),
+        "Explain did not finish: {:?}",
+        h.state().explain_log
+    );
+    let log = h.state().explain_log.clone();
+    // It said what it added and why, then why it stopped; each line is shown.
+    assert!(
+        log.iter().any(
+            |l| l.text.starts_with("added gps_lag: held-out") && l.detail.starts_with("lag 0.")
+        ),
+        "{log:?}"
+    );
+    let last = log.last().expect("a line");
+    assert!(
+        last.text.starts_with("nothing more is significant"),
+        "{log:?}"
+    );
+    for line in &log {
+        h.get_by_label(&line.text);
+    }
+    // The model history grew by the added model, which is now the current one.
+    assert!(step_until(&mut h, Duration::from_secs(60), |a| a
+        .history
+        .iter()
+        .any(|r| r.model.contains("gps_lag"))));
+    let effects = &h.state().settings.fit.model.effects;
+    assert!(effects.contains(&"gps_lag".to_string()), "{effects:?}");
+    // The effects can still be changed by hand: Explain is idle again.
+    assert!(h.state().explaining.is_none());
+    h.get_by_label("Explain");
+}

@@ -315,3 +315,51 @@ fn the_reference_track_is_drawn_on_the_map_and_its_error_in_the_residual_plot() 
     assert!(map > 300, "{map} map pixels changed");
     assert!(plots > 100, "{plots} residual-plot pixels changed");
 }
+
+#[test]
+fn explain_draws_its_steps_in_the_diagnosis_panel() {
+    let app = GyropathApp::new(AppSettings::default(), sample_ride(), || {});
+    let mut h = Harness::builder()
+        .with_size(egui::vec2(1280.0, 800.0))
+        .wgpu()
+        .build_ui_state(|ui, app: &mut GyropathApp| app.ui(ui), app);
+    let ride = gyropath::app::examples::EXAMPLES
+        .iter()
+        .find(|e| e.label.contains("GPS lag"))
+        .and_then(|e| e.file())
+        .expect("the GPS lag example");
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::file(ride),
+    ));
+    let start = Instant::now();
+    let mut explained = false;
+    while start.elapsed() < Duration::from_secs(600) {
+        h.step();
+        let a = h.state();
+        if !explained
+            && a.ride
+                .as_ref()
+                .is_some_and(|r| r.source.name().contains("hidden-gps-lag"))
+            && a.snapshot.as_ref().is_some_and(|s| s.sigma.is_some())
+        {
+            h.state_mut().apply(gyropath::app::Command::Explain);
+            explained = true;
+        } else if explained
+            && a.explaining.is_none()
+            && a.snapshot.as_ref().is_some_and(|s| s.sigma.is_some())
+        {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run();
+    let image = h.render().expect("render");
+    image
+        .save(std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("app_explained.png"))
+        .expect("save");
+    let log = &h.state().explain_log;
+    assert!(
+        log.iter().any(|l| l.text.starts_with("added gps_lag")),
+        "{log:?}"
+    );
+}

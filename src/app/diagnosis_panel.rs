@@ -23,6 +23,7 @@ impl GyropathApp {
                 ui.label(p);
             }
         });
+        self.explain_ui(ui, commands);
         let Some(d) = &self.diagnosis else {
             ui.label("Diagnose ranks every effect the model lacks by the held-out error it saves.");
             if self
@@ -41,15 +42,15 @@ impl GyropathApp {
             n => format!(" ({n} jumps out)"),
         };
         ui.label(format!(
-            "{} refitted under the noise as set ({}): fit {:.3} m, held-out {:.3} m{jumps}",
+            "{}: fit {:.3} m, held-out {:.3} m{jumps}",
             short_model(&d.model.join(", ")),
-            d.gps_noise,
             d.fit_rms_m,
             d.heldout_rms_m
         ))
-        .on_hover_text(
-            "The ranking compares candidates under the GPS noise as set in Settings (not the noise estimated from the ride), as its significance rule was calibrated; so these errors can differ from the model history's, which are of the fit as it runs.",
-        );
+        .on_hover_text(format!(
+            "Refitted under {}, the GPS noise as set in Settings (not the noise estimated from the ride), as the ranking's significance rule was calibrated; so these errors can differ from the model history's, which are of the fit as it runs.",
+            d.gps_noise
+        ));
         let current = self.snapshot.as_ref().map(|s| s.effects.clone());
         let stale = current.as_ref().is_some_and(|c| *c != d.model);
         if stale {

@@ -14,6 +14,7 @@
 mod diagnosis_panel;
 mod effects_panel;
 pub mod examples;
+pub mod explain;
 mod fit_panel;
 mod history_panel;
 pub mod map_tiles;
@@ -93,6 +94,10 @@ pub enum Command {
     Diagnose,
     /// Switch an effect on and refit.
     AddEffect(String),
+    /// Diagnose and Add until nothing significant is left.
+    Explain,
+    /// End Explain; the models found so far stay.
+    StopExplain,
     /// Pick a reference track of the loaded ride with a file dialog.
     PickReference,
     /// Measure the fit against this reference track.
@@ -139,6 +144,9 @@ pub struct GyropathApp {
     pub reference: Option<worker::ReferenceView>,
     /// Progress of a running diagnosis.
     pub diagnosing: Option<String>,
+    /// A running Explain, and what it has said (kept after it ends).
+    pub explaining: Option<explain::Explaining>,
+    pub explain_log: Vec<explain::ExplainLine>,
     hover_t: Option<f64>,
     picked_tx: Sender<Picked>,
     picked_rx: Receiver<Picked>,
@@ -216,6 +224,8 @@ impl GyropathApp {
             diagnosis: None,
             reference: None,
             diagnosing: None,
+            explaining: None,
+            explain_log: Vec::new(),
             hover_t: None,
             picked_tx,
             picked_rx,
@@ -256,12 +266,20 @@ impl GyropathApp {
                 }
                 Update::Snapshot(s) => {
                     self.record_history(&s);
+                    let done = s.phase == Phase::Done;
                     self.snapshot = Some(*s);
+                    if done {
+                        self.explain_fit_finished();
+                    }
                 }
                 Update::Running(r) => self.running = r,
                 Update::Error(e) => {
                     if e.starts_with("diagnosis failed") {
                         self.diagnosing = None;
+                        if self.explaining.take().is_some() {
+                            self.explain_log
+                                .push(explain::ExplainLine::new("Explain stops", e.clone()));
+                        }
                     }
                     self.error = Some(e);
                 }
@@ -282,7 +300,12 @@ impl GyropathApp {
                 // history keeps one kind of number, its own validation's.
                 Update::Diagnosis(d) => {
                     self.diagnosing = None;
+                    let mut commands = Vec::new();
+                    self.explain_diagnosed(&d, &mut commands);
                     self.diagnosis = Some(*d);
+                    for c in commands {
+                        self.apply(c);
+                    }
                 }
                 Update::HeldOut {
                     model,
@@ -421,6 +444,8 @@ impl GyropathApp {
                 self.diagnosing = Some("starting".into());
                 self.worker.send(Request::Diagnose);
             }
+            Command::Explain => self.start_explain(),
+            Command::StopExplain => self.stop_explain(),
             Command::AddEffect(id) => {
                 effects_panel::set_effect(&mut self.settings.fit.model.effects, &id, true);
                 self.worker
@@ -467,7 +492,10 @@ impl GyropathApp {
             .show(ui, |ui| {
                 ui.columns(2, |cols| {
                     self.history_ui(&mut cols[0]);
-                    self.diagnosis_ui(&mut cols[1], &mut commands);
+                    // The ranking and Explain's lines can be taller than the panel.
+                    egui::ScrollArea::vertical()
+                        .id_salt("diagnosis-scroll")
+                        .show(&mut cols[1], |ui| self.diagnosis_ui(ui, &mut commands));
                 });
             });
         egui::CentralPanel::default().show(ui, |ui| self.plots_ui(ui));
