@@ -1097,6 +1097,11 @@ fn explain_runs_the_whole_loop_and_its_model_carries_to_the_next_fit() {
         "{}",
         r["model"]
     );
+    // With --json - the steps go to standard error and standard output is JSON alone.
+    let out = gyropath(&["explain", comma, "--quiet", "--json", "-"]);
+    let e: serde_json::Value = serde_json::from_slice(&out.stdout).expect("JSON alone");
+    assert_eq!(e["steps"].as_array().unwrap().len(), 2);
+    assert!(String::from_utf8_lossy(&out.stderr).contains("added     gps_lag"));
     // A file that is no saved model is refused, naming it.
     let out = gyropath(&["fit", comma, "--model", truth]);
     assert_eq!(out.status.code(), Some(1));

@@ -81,6 +81,21 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
     for json in [&args.json, &args.save_model].into_iter().flatten() {
         check_report_name(json)?;
     }
+    let to_stdout = [&args.out, &args.json, &args.save_model]
+        .iter()
+        .filter(|p| p.as_deref().is_some_and(is_stdout))
+        .count();
+    if to_stdout > 1 {
+        anyhow::bail!("only one of --out, --json and --save-model can go to standard output");
+    }
+    // Data on standard output: the steps go to standard error.
+    let say = |line: String| {
+        if to_stdout > 0 {
+            eprintln!("{line}");
+        } else {
+            println!("{line}");
+        }
+    };
     let signals = load_signals(&args.ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {
@@ -102,7 +117,7 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
         }
         Progress::Step(s) => match &bar {
             Some(b) => b.println(step_line(s)),
-            None => println!("{}", step_line(s)),
+            None => say(step_line(s)),
         },
     };
     let (explanation, fit) = run_loop(
@@ -115,12 +130,12 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    println!("{}", ending_line(&explanation, &fit));
+    say(ending_line(&explanation, &fit));
     if let Some(d) = &explanation.last_diagnosis {
-        println!(
+        say(format!(
             "          held-out errors under {} (the ranking's noise); paths under the noise each fit estimates",
             d.gps_noise
-        );
+        ));
     }
     if let (Some(out), Some(format)) = (&args.out, path_format) {
         let uncertainty = fit.model().uncertainty(fit.params());
