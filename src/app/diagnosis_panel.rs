@@ -3,6 +3,7 @@
 
 use super::worker::RideSource;
 use super::{Command, GyropathApp, short_model};
+use crate::diagnosis::describe_estimates;
 
 impl GyropathApp {
     pub(super) fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {
@@ -102,12 +103,7 @@ impl GyropathApp {
                             };
                             let detail = match &c.error {
                                 Some(e) => e.clone(),
-                                None => c
-                                    .estimate
-                                    .iter()
-                                    .map(|(k, e)| format!("{k} {}", e.describe()))
-                                    .collect::<Vec<_>>()
-                                    .join(", "),
+                                None => describe_estimates(&c.estimate),
                             };
                             ui.vertical(|ui| {
                                 ui.set_max_width(name_w);

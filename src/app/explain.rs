@@ -9,7 +9,7 @@
 
 use super::worker::Request;
 use super::{Command, GyropathApp};
-use crate::diagnosis::Diagnosis;
+use crate::diagnosis::{Diagnosis, describe_estimates};
 use crate::optimisation::Phase;
 
 /// At most this many effects are added (as `explain::MAX_ADDED`).
@@ -118,11 +118,6 @@ impl GyropathApp {
         let top = d.ranking.first().filter(|c| c.significant);
         match top {
             Some(c) if e.added.len() < MAX_ADDED => {
-                let estimate: Vec<String> = c
-                    .estimate
-                    .iter()
-                    .map(|(k, v)| format!("{k} {}", v.describe()))
-                    .collect();
                 self.explain_log.push(ExplainLine::new(
                     format!(
                         "added {}: held-out {:.3} m, {:.1} % lower (t {:.1})",
@@ -133,7 +128,7 @@ impl GyropathApp {
                     ),
                     format!(
                         "{}; held-out error under {}. {}",
-                        estimate.join(", "),
+                        describe_estimates(&c.estimate),
                         d.gps_noise,
                         c.explanation
                     ),

@@ -253,11 +253,6 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
             );
             continue;
         }
-        let est: Vec<String> = c
-            .estimate
-            .iter()
-            .map(|(k, e)| format!("{k} {}", e.describe()))
-            .collect();
         _ = writeln!(
             out,
             "{:<5}{:<26}{:>9.3} m{:>7.1}%{:>7.1}  {:<5}{}  {}",
@@ -270,7 +265,7 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
             c.reference
                 .as_ref()
                 .map_or(String::new(), |r| format!("{:>8.3} m", r.horizontal.rms_m)),
-            est.join(", ")
+            describe_estimates(&c.estimate)
         );
     }
     if !d.not_physical.is_empty() {

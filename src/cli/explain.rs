@@ -48,14 +48,9 @@ fn step_line(s: &Step) -> String {
             s.elapsed_s
         ),
         Some(effect) => {
-            let estimate: Vec<String> = s
-                .estimate
-                .iter()
-                .map(|(k, e)| format!("{k} {}", e.describe()))
-                .collect();
             format!(
                 "added     {effect} ({}): held-out {:.3} m, {:.1} % lower (t {:.1}); path to the fixes {:.3} m{reference} ({:.1} s)",
-                estimate.join(", "),
+                describe_estimates(&s.estimate),
                 s.heldout_rms_m,
                 100.0 * s.drop,
                 s.t_statistic,

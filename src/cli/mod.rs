@@ -11,7 +11,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use gyropath::diagnosis::{Diagnosis, Folds};
+use gyropath::diagnosis::{Diagnosis, Folds, describe_estimates};
 use gyropath::export::{
     FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
     write_path_csv, write_path_gpx, write_path_tum,

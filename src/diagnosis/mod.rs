@@ -10,8 +10,8 @@ pub mod validation;
 pub mod whiteness;
 
 pub use ranking::{
-    Against, Candidate, Diagnosis, Estimate, diagnose, diagnose_against, diagnose_fitted,
-    diagnose_fitted_against,
+    Against, Candidate, Diagnosis, Estimate, describe_estimates, diagnose, diagnose_against,
+    diagnose_fitted, diagnose_fitted_against,
 };
 pub use reference::{ErrorStats, ReferenceComparison, ReferenceError};
 pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};

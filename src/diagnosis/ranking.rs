@@ -85,6 +85,16 @@ impl Estimate {
     }
 }
 
+/// Every parameter of an estimate with its 1-sigma, in one line:
+/// "lag 0.096 ± 0.010 s, scale_error_z -0.899 ± 0.140 %".
+pub fn describe_estimates(estimate: &BTreeMap<String, Estimate>) -> String {
+    estimate
+        .iter()
+        .map(|(k, e)| format!("{k} {}", e.describe()))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
 /// One candidate effect, fitted and validated.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct Candidate {
