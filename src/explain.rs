@@ -16,7 +16,7 @@ use std::time::Instant;
 
 use crate::diagnosis::{Diagnosis, Estimate, Folds, ReferenceComparison, diagnose_fitted_against};
 use crate::optimisation::{FitError, FitSettings, Reconstruction};
-use crate::pipeline::{self, Judgement, MatchedReference};
+use crate::pipeline::{self, MatchedReference};
 use crate::signals::Signals;
 
 /// At most this many effects are added: more than the catalogue's that can
@@ -98,7 +98,7 @@ pub fn explain(
     let mut current = Reconstruction::new(signals.clone(), settings.clone())?;
     current.finish();
     let mut steps = vec![step_of(&current, None, reference, started)];
-    if let Some(failure) = failure_of(&current) {
+    if let Some(failure) = pipeline::failure(&current) {
         observer(Progress::Step(&steps[0]));
         let explanation = Explanation {
             steps,
@@ -136,7 +136,7 @@ pub fn explain(
         next_settings.model.effects.push(top.effect.clone());
         let mut next = Reconstruction::new(signals.clone(), next_settings.clone())?;
         next.finish();
-        if let Some(failure) = failure_of(&next) {
+        if let Some(failure) = pipeline::failure(&next) {
             let explanation = Explanation {
                 steps,
                 ending: Ending::NoResult(failure),
@@ -160,14 +160,6 @@ pub fn explain(
         last_diagnosis: None,
     };
     Ok((explanation, current))
-}
-
-/// The failure message of a fit that is no result, or `None`.
-fn failure_of(fit: &Reconstruction) -> Option<String> {
-    match pipeline::judge(fit.model(), fit.params()) {
-        Judgement::Result => None,
-        j => j.failure(&fit.model().signals.source, fit.stats().rms_horizontal_m),
-    }
 }
 
 /// The record of a finished fit (the ranking's figures are filled in by the caller).

@@ -521,7 +521,8 @@ impl FitReport {
         let mut parameters: BTreeMap<String, Vec<ParamValue>> = BTreeMap::new();
         let fixed = model.fixed_mask();
         let fixed_mask = fixed.clone();
-        let sigmas_for_bias = sigmas.clone();
+        // Read before the loop below takes the sigmas.
+        let bias_sigmas = crate::diagnosis::segment_sigmas(model, &sigmas);
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -570,7 +571,7 @@ impl FitReport {
                 });
                 BiasTotal::of(
                     &crate::diagnosis::segment_biases(model, fit.params()),
-                    &crate::diagnosis::segment_sigmas(model, &sigmas_for_bias),
+                    &bias_sigmas,
                     fitted,
                 )
             },

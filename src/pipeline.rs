@@ -94,6 +94,13 @@ pub fn judge(model: &Model, theta: &[f64]) -> Judgement {
     }
 }
 
+/// Why a finished fit is no result, in one message naming its ride, or
+/// `None` when it is a result (see [`judge`] and [`Judgement::failure`]).
+pub fn failure(fit: &Reconstruction) -> Option<String> {
+    judge(fit.model(), fit.params())
+        .failure(&fit.model().signals.source, fit.stats().rms_horizontal_m)
+}
+
 /// The report of a finished fit: its parameters with their sigmas (and the
 /// path's uncertainty, returned for the path file, when `with_path_sigma`),
 /// measured against the reference track when one is given.

@@ -326,9 +326,7 @@ fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Resu
 /// A fit beyond the physical limits is a failure, with its likely cause,
 /// never a result (see `gyropath::limits`).
 fn physical(fit: &Reconstruction) -> Result<()> {
-    match pipeline::judge(fit.model(), fit.params())
-        .failure(&fit.model().signals.source, fit.stats().rms_horizontal_m)
-    {
+    match pipeline::failure(fit) {
         Some(message) => anyhow::bail!(message),
         None => Ok(()),
     }
