@@ -76,16 +76,14 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
     for json in [&args.json, &args.save_model].into_iter().flatten() {
         check_report_name(json)?;
     }
-    let to_stdout = [&args.out, &args.json, &args.save_model]
-        .iter()
-        .filter(|p| p.as_deref().is_some_and(is_stdout))
-        .count();
-    if to_stdout > 1 {
-        anyhow::bail!("only one of --out, --json and --save-model can go to standard output");
-    }
+    let data_is_stdout = data_on_stdout(&[
+        ("--out", &args.out),
+        ("--json", &args.json),
+        ("--save-model", &args.save_model),
+    ])?;
     // Data on standard output: the steps go to standard error.
     let say = |line: String| {
-        if to_stdout > 0 {
+        if data_is_stdout {
             eprintln!("{line}");
         } else {
             println!("{line}");

@@ -106,11 +106,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let Some(rep) = &args.json {
         check_report_name(rep)?;
     }
-    let to_stdout = |p: &Option<PathBuf>| p.as_deref().is_some_and(is_stdout);
-    if to_stdout(&args.out) && to_stdout(&args.json) {
-        anyhow::bail!("--out and --json cannot both go to standard output");
-    }
-    let data_is_stdout = to_stdout(&args.out) || to_stdout(&args.json);
+    let data_is_stdout = data_on_stdout(&[("--out", &args.out), ("--json", &args.json)])?;
     let signals = load_signals(ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {

@@ -368,3 +368,19 @@ fn write_path(
     }
     .context("the path could not be written")
 }
+
+/// Whether one of a command's outputs goes to standard output (`-`), where
+/// its summary must then stay out of the way; an error naming them when
+/// more than one does, since their data would be mixed.
+fn data_on_stdout(outputs: &[(&str, &Option<PathBuf>)]) -> Result<bool> {
+    let on: Vec<&str> = outputs
+        .iter()
+        .filter(|(_, p)| p.as_deref().is_some_and(is_stdout))
+        .map(|(flag, _)| *flag)
+        .collect();
+    if on.len() > 1 {
+        let all = if on.len() == 2 { "both" } else { "all" };
+        anyhow::bail!("{} cannot {all} go to standard output", on.join(" and "));
+    }
+    Ok(on.len() == 1)
+}
