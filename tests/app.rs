@@ -428,13 +428,18 @@ fn file_examples_opens_a_ride_with_something_to_find() {
         .is_some()));
     // The bundled sample says where to find a ride with something missing.
     h.get_by_label_contains("File > Examples has rides with something to find");
+    open_gps_lag_example(&mut h);
+}
+
+/// File > Examples > GPS lag, through the menus, until the ride is loaded.
+fn open_gps_lag_example(h: &mut Harness<'static, GyropathApp>) {
     h.get_by_label("File").click();
     h.run_steps(2);
     h.get_by_label("Examples").hover();
     h.run_steps(3);
     h.get_by_label("GPS lag (simulated bicycle)").click();
     assert!(
-        step_until(&mut h, Duration::from_secs(60), |a| a
+        step_until(h, Duration::from_secs(60), |a| a
             .ride
             .as_ref()
             .is_some_and(|r| r.source.name().contains("hidden-gps-lag"))),
@@ -546,16 +551,10 @@ fn explain_adds_the_missing_effect_and_stops_when_nothing_more_is_significant() 
     assert!(step_until(&mut h, Duration::from_secs(30), |a| a
         .snapshot
         .is_some()));
-    h.get_by_label("File").click();
-    h.run_steps(2);
-    h.get_by_label("Examples").hover();
-    h.run_steps(3);
-    h.get_by_label("GPS lag (simulated bicycle)").click();
+    open_gps_lag_example(&mut h);
     assert!(step_until(&mut h, Duration::from_secs(60), |a| a
-        .ride
-        .as_ref()
-        .is_some_and(|r| r.source.name().contains("hidden-gps-lag"))
-        && a.snapshot.is_some()));
+        .snapshot
+        .is_some()));
     h.get_by_label("Explain").click();
     assert!(
         step_until(&mut h, Duration::from_secs(600), |a| a.explaining.is_none()
