@@ -5,6 +5,7 @@ mod cli;
 use clap::Parser;
 
 fn main() {
+    restore_sigpipe();
     let args = cli::Cli::parse();
     let result = match &args.command {
         Some(cli::Command::Fit(a)) => cli::fit(a),
@@ -44,3 +45,19 @@ fn open_app(
     println!();
     anyhow::bail!("this build has no app (built without the `app` feature); use a subcommand")
 }
+
+/// Rust ignores SIGPIPE, so a write to a closed pipe (`gyropath explain RIDE
+/// | head -2`) is an error that `println!` turns into a panic. The default
+/// disposition ends the process quietly when the reader has gone, as every
+/// Unix tool does.
+#[cfg(unix)]
+fn restore_sigpipe() {
+    // SAFETY: called first thing in main, before any other thread exists;
+    // SIG_DFL is a valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
+#[cfg(not(unix))]
+fn restore_sigpipe() {}

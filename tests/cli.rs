@@ -1107,3 +1107,27 @@ fn explain_runs_the_whole_loop_and_its_model_carries_to_the_next_fit() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a model saved by"));
 }
+
+#[test]
+fn a_reader_that_stops_early_ends_the_command_quietly() {
+    use std::io::{BufRead, BufReader};
+    let comma = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    );
+    // As `gyropath explain RIDE | head -1`: the reader goes after a line.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .args(["explain", comma, "--quiet"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap())
+        .read_line(&mut first)
+        .unwrap();
+    assert!(first.starts_with("base "), "{first}");
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+}
