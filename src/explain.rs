@@ -73,6 +73,26 @@ pub struct Explanation {
     pub last_diagnosis: Option<Diagnosis>,
 }
 
+/// A model saved for the next rides of the same sensor: what
+/// `gyropath explain --save-model` writes and `gyropath fit --model` reads.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub struct SavedModel {
+    /// The ride it was explained on.
+    pub source: String,
+    /// The effects and settings.
+    pub model: crate::model::ModelSpec,
+}
+
+impl SavedModel {
+    /// The model of a finished fit.
+    pub fn of(fit: &Reconstruction) -> Self {
+        Self {
+            source: fit.model().signals.source.clone(),
+            model: fit.model().spec.clone(),
+        }
+    }
+}
+
 /// What the loop reports as it works.
 pub enum Progress<'a> {
     /// A line of work in progress ("tried gps_lag (2 of 4)").

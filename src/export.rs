@@ -159,6 +159,20 @@ pub fn check_report_name(path: &Path) -> Result<(), ExportError> {
     })
 }
 
+/// An HTML report must be named `.html` or `.htm`, `-` or a special file.
+pub fn check_html_name(path: &Path) -> Result<(), ExportError> {
+    let ext = extension(path);
+    if path.as_os_str() == "-" || is_special(path) || matches!(ext.as_deref(), Some("html" | "htm"))
+    {
+        return Ok(());
+    }
+    Err(ExportError::UnknownFormat {
+        path: path.display().to_string(),
+        what: "HTML report",
+        choices: ".html (or - for standard output)",
+    })
+}
+
 fn extension(path: &Path) -> Option<String> {
     path.extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())

@@ -12,6 +12,7 @@
 //! - [`optimisation`]: step 1 (globals, LM) and step 2 (segment biases, GD or LM), one iteration at a time.
 //! - [`diagnosis`]: residuals along/across the track, bias per segment, held-out error.
 //! - [`export`]: reconstructed path CSV and JSON report.
+//! - [`report`]: the self-contained HTML report of a fit (and a batch's index page).
 //! - `app` (feature `app`, on by default): the eframe desktop app; draws what the core computes.
 //! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
 //! - [`statistics`]: order statistics (the median) that the modules above share.
@@ -32,6 +33,7 @@ pub mod limits;
 pub mod model;
 pub mod optimisation;
 pub mod pipeline;
+pub mod report;
 pub mod ride;
 pub mod rotation;
 pub mod signals;

@@ -10,7 +10,9 @@ use std::sync::Arc;
 
 use crate::diagnosis::reference::{self, Matched, ReferenceError};
 use crate::export::FitReport;
-use crate::import::{self, ImportOptions, Imported, LoadError, ReferenceTrack};
+use crate::import::{
+    self, ImportOptions, Imported, LoadError, ReferenceTrack, SourceKind, Topics, Verdict,
+};
 use crate::limits::{self, Violation};
 use crate::model::{Model, Uncertainty};
 use crate::optimisation::Reconstruction;
@@ -30,6 +32,30 @@ pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference,
     let track = import::read_reference(path)?;
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))
+}
+
+/// Where a ride came from: its kind, the topics read (bags), the mounting
+/// applied and the checks' verdicts, for the Source panel.
+#[derive(Clone, Debug, Default)]
+pub struct Origin {
+    pub kind: Option<SourceKind>,
+    pub topics: Option<Topics>,
+    pub mount: Option<String>,
+    pub recommended: Option<String>,
+    pub verdicts: Vec<Verdict>,
+}
+
+impl Origin {
+    /// What `im` was read from and what its checks said.
+    pub fn of(im: &Imported) -> Self {
+        Self {
+            kind: Some(im.kind),
+            topics: im.topics.clone(),
+            mount: im.mount.as_ref().map(ToString::to_string),
+            recommended: im.check.recommended.as_ref().map(ToString::to_string),
+            verdicts: im.check.after_mounting(im.mount.as_ref()),
+        }
+    }
 }
 
 /// Why a step of the journey failed.
@@ -113,7 +139,19 @@ pub fn report(
     let uncertainty = with_path_sigma
         .then(|| fit.model().uncertainty(fit.params()))
         .flatten();
-    let mut report = match &uncertainty {
+    let report = report_with(fit, elapsed_s, uncertainty.as_ref(), reference);
+    (report, uncertainty)
+}
+
+/// [`report`] with the sigmas of an uncertainty already computed (at any
+/// rows: only its parameters' sigmas are read), or the parameters' own.
+pub fn report_with(
+    fit: &Reconstruction,
+    elapsed_s: f64,
+    uncertainty: Option<&Uncertainty>,
+    reference: Option<&MatchedReference>,
+) -> FitReport {
+    let mut report = match uncertainty {
         Some(u) => FitReport::with_uncertainty(fit, elapsed_s, u),
         None => FitReport::new(fit, elapsed_s),
     };
@@ -125,7 +163,7 @@ pub fn report(
             matched,
         ));
     }
-    (report, uncertainty)
+    report
 }
 
 /// The signals of an opened input, shared between the fit and its checks.

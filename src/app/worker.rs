@@ -12,14 +12,15 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, TryRecvError};
 use std::time::{Duration, Instant};
 
 use crate::diagnosis::reference::{self, Matched};
+use crate::diagnosis::view::{decimated_rows, peaks};
 use crate::diagnosis::{
-    Diagnosis, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
-    fix_residuals, held_out_rms, segment_biases,
+    Diagnosis, FitView, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
+    held_out_rms,
 };
 use crate::export::{write_atomically, write_json, write_path_csv, write_path_gpx, write_path_tum};
 use crate::import::ReferenceTrack;
-use crate::import::{self, ImportOptions, MountChoice, SourceKind, Topics, Verdict};
-use crate::model::{Model, PathAt};
+use crate::import::{self, ImportOptions, MountChoice, SourceKind};
+use crate::model::Model;
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
 use crate::pipeline;
 use crate::signals::Signals;
@@ -112,28 +113,7 @@ pub struct RideView {
     pub frame: crate::geodesy::LocalFrame,
 }
 
-/// Where a ride came from: its kind, the topics read (bags), the mounting
-/// applied and the checks' verdicts, for the Source panel.
-#[derive(Clone, Debug, Default)]
-pub struct Origin {
-    pub kind: Option<SourceKind>,
-    pub topics: Option<Topics>,
-    pub mount: Option<String>,
-    pub recommended: Option<String>,
-    pub verdicts: Vec<Verdict>,
-}
-
-impl Origin {
-    fn of(im: &import::Imported) -> Self {
-        Self {
-            kind: Some(im.kind),
-            topics: im.topics.clone(),
-            mount: im.mount.as_ref().map(ToString::to_string),
-            recommended: im.check.recommended.as_ref().map(ToString::to_string),
-            verdicts: im.check.after_mounting(im.mount.as_ref()),
-        }
-    }
-}
+pub use crate::pipeline::Origin;
 
 /// The state of the fit after an iteration, decimated for drawing.
 #[derive(Clone, Debug)]
@@ -622,23 +602,14 @@ impl Worker {
 
 fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
     let fixes: Vec<[f64; 3]> = sig.fixes.iter().map(|f| [f.t, f.en[0], f.en[1]]).collect();
-    let mut outages = Vec::new();
     let t_first = sig.t[0];
-    let t_last = sig.t[sig.len() - 1];
-    let mut prev = t_first;
-    for f in sig.fixes.iter().map(|f| f.t).chain(std::iter::once(t_last)) {
-        if f - prev > 2.5 {
-            outages.push((prev, f));
-        }
-        prev = f;
-    }
     RideView {
         source: source.clone(),
         rows: sig.len(),
         duration_s: sig.duration(),
         t0: t_first,
         fixes,
-        outages,
+        outages: crate::diagnosis::view::outages(sig),
         channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
         warnings: sig.warnings.clone(),
         origin,
@@ -647,29 +618,9 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
     }
 }
 
-/// `(t, value)` pairs thinned to at most `n`: each kept point is the largest
-/// value of the stretch it stands for, so no error peak is lost to drawing.
-fn peaks(series: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
-    let stride = series.len().div_ceil(n).max(1);
-    series
-        .chunks(stride)
-        .filter_map(|c| c.iter().copied().max_by(|a, b| a.1.total_cmp(&b.1)))
-        .collect()
-}
-
-/// The rows of the path decimated to at most [`MAX_PATH_POINTS`] (always keeping the last row).
-fn decimated_rows(n: usize) -> Vec<usize> {
-    let stride = n.div_ceil(MAX_PATH_POINTS).max(1);
-    let mut rows: Vec<usize> = (0..n).step_by(stride).collect();
-    if n > 0 && !(n - 1).is_multiple_of(stride) {
-        rows.push(n - 1);
-    }
-    rows
-}
-
 /// The uncertainty of a finished fit at the rows a snapshot draws.
 pub fn finished_uncertainty(fit: &Reconstruction) -> Option<crate::model::Uncertainty> {
-    let rows = decimated_rows(fit.model().signals.t.len());
+    let rows = decimated_rows(fit.model().signals.t.len(), MAX_PATH_POINTS);
     fit.model().uncertainty_at(fit.params(), Some(&rows))
 }
 
@@ -680,23 +631,8 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
     let theta = fit.params();
     // One sweep, keeping only the rows drawn and the rows the residuals read:
     // never the whole trajectory (some 190 MB on a 6-hour ride, per snapshot).
-    let t = &model.signals.t;
-    let path_rows = decimated_rows(t.len());
-    let mut rows = model.residual_rows(theta);
-    rows.extend(&path_rows);
-    rows.sort_unstable();
-    rows.dedup();
-    let sparse = model.sparse_path(theta, rows);
-    let segments = segment_biases(model, theta);
-    let segments_len = segments.len();
-    let residuals = fix_residuals(model, theta, &sparse);
-    let path = path_rows
-        .iter()
-        .map(|&j| {
-            let p = sparse.p_at(j);
-            [t[j], p.x, p.y]
-        })
-        .collect();
+    let view = FitView::of(model, theta, MAX_PATH_POINTS);
+    let segments_len = view.segments.len();
     let mut param_sigmas = Vec::new();
     let mut params = Vec::new();
     for (e, effect) in model.effects().iter().enumerate() {
@@ -725,15 +661,15 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
         phase: fit.phase(),
         history: fit.history().to_vec(),
         stats: fit.stats(),
-        path,
-        residual_rms: ResidualRms::of(&residuals),
-        normalised_spread: crate::diagnosis::NormalisedSpread::of(&residuals),
-        residuals,
-        segments,
+        path: view.path,
+        residual_rms: ResidualRms::of(&view.residuals),
+        normalised_spread: crate::diagnosis::NormalisedSpread::of(&view.residuals),
+        residuals: view.residuals,
+        segments: view.segments,
         params,
         n_params: model.n_params(),
         effects: model.effect_ids(),
-        violations: crate::limits::check_on(model, theta, &sparse)
+        violations: crate::limits::check_on(model, theta, &view.sparse)
             .iter()
             .map(ToString::to_string)
             .collect(),

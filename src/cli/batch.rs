@@ -1,6 +1,8 @@
 //! `gyropath fit` on several rides or a folder: every ride on all cores, outputs
 //! that never collide, and a summary table.
 
+use gyropath::report::IndexEntry;
+
 use super::*;
 
 /// One line of the batch summary.
@@ -102,7 +104,8 @@ fn reference_for(ride: &Path, reference: Option<&Path>) -> Option<PathBuf> {
 }
 
 /// Fit one ride of a batch and write its outputs into `out_dir` as
-/// `STEM-path.csv` and `STEM-report.json` (nothing without an `out_dir`).
+/// `STEM-path.csv`, `STEM-report.json` and `STEM-report.html` (nothing
+/// without an `out_dir`).
 fn fit_one(
     ride: &Path,
     source: &SourceArgs,
@@ -112,7 +115,7 @@ fn fit_one(
     reference: Option<&Path>,
 ) -> Result<FitReport> {
     let started = Instant::now();
-    let signals = load_signals(ride, source, true)?;
+    let (signals, origin) = load_ride(ride, source, true)?;
     let against = matched_reference(reference_for(ride, reference).as_deref(), &signals)?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
@@ -132,6 +135,18 @@ fn fit_one(
             uncertainty.as_ref(),
         )?;
         write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
+        let contents = gyropath::report::Contents {
+            fit: &fit,
+            origin: Some(&origin),
+            reference: against.as_ref(),
+            uncertainty: uncertainty.as_ref(),
+            history: Vec::new(),
+            explanation: None,
+            diagnosis: None,
+            command: command_line(),
+            elapsed_s: report.elapsed_s,
+        };
+        write_html(&dir.join(format!("{stem}-report.html")), ride, &contents)?;
     }
     Ok(report)
 }
@@ -141,8 +156,8 @@ fn fit_one(
 /// fail are reported in the table and make the exit status 1, but never stop the others.
 pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
     use rayon::prelude::*;
-    if args.out.is_some() || args.json.is_some() {
-        anyhow::bail!("with several rides use --out-dir instead of --out/--json");
+    if args.out.is_some() || args.json.is_some() || args.html.is_some() {
+        anyhow::bail!("with several rides use --out-dir instead of --out/--json/--html");
     }
     // Without --out-dir a batch writes no files: a folder of rides must not
     // scatter outputs into the working directory.
@@ -211,6 +226,9 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
             }
         }
     }
+    if let Some(dir) = out_dir {
+        write_index(dir, &rows, &stems)?;
+    }
     println!(
         "{} rides, {} fitted, {} failed, {:.1} s on {} threads; {}",
         rows.len(),
@@ -227,4 +245,35 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
         anyhow::bail!("{failed} of {} rides could not be fitted", rows.len());
     }
     Ok(())
+}
+
+/// The batch's `index.html`: every ride with its outcome, linking its report.
+fn write_index(dir: &Path, rows: &[BatchRow], stems: &[String]) -> Result<()> {
+    let entries: Vec<IndexEntry> = rows
+        .iter()
+        .zip(stems)
+        .map(|(row, stem)| match &row.outcome {
+            Ok(r) => IndexEntry {
+                source: row.ride.clone(),
+                href: Some(format!("{stem}-report.html")),
+                outcome: format!(
+                    "{:.3} m to the fixes (under {})",
+                    r.stats.rms_horizontal_m, r.gps_noise
+                ),
+                reference: r.reference.as_ref().map_or("-".into(), |c| {
+                    format!("{:.3} m RMS ({})", c.horizontal.rms_m, c.coverage())
+                }),
+            },
+            Err(e) => IndexEntry {
+                source: row.ride.clone(),
+                href: None,
+                outcome: format!("failed: {e}"),
+                reference: "-".into(),
+            },
+        })
+        .collect();
+    let page = gyropath::report::index_html(&entries)?;
+    let path = dir.join("index.html");
+    write_atomically(&path, None, |w| w.write_all(page.as_bytes()))
+        .with_context(|| format!("{}: the index could not be written", path.display()))
 }

@@ -2,7 +2,7 @@
 //! step (fit, diagnose, add the top significant effect, refit, until nothing
 //! significant is left), each step told as it finishes.
 
-use gyropath::explain::{Ending, Explanation, Progress, Step, explain as run_loop};
+use gyropath::explain::{Ending, Explanation, Progress, SavedModel, Step, explain as run_loop};
 
 use super::*;
 
@@ -24,6 +24,11 @@ pub struct ExplainArgs {
     /// Write every step, why the loop ended and the last ranking here (JSON).
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Write a report to share here (HTML, opens offline in any browser):
+    /// the ride, every step of the loop, the final model's map, residuals
+    /// and bias, and the last ranking.
+    #[arg(long)]
+    pub html: Option<PathBuf>,
     /// Save the final model (its effects and settings) here (JSON), for
     /// `gyropath fit OTHER_RIDE --model FILE` and the next rides of the same sensor.
     #[arg(long)]
@@ -61,24 +66,20 @@ fn step_line(s: &Step) -> String {
     }
 }
 
-/// The saved model: what `fit --model` reads back.
-#[derive(serde::Serialize, serde::Deserialize)]
-pub struct SavedModel {
-    /// The ride it was explained on.
-    pub source: String,
-    /// The effects and settings.
-    pub model: ModelSpec,
-}
-
 pub fn explain(args: &ExplainArgs) -> Result<()> {
     let settings = args.settings.settings()?;
     let path_format = args.out.as_deref().map(PathFormat::of).transpose()?;
     for json in [&args.json, &args.save_model].into_iter().flatten() {
         check_report_name(json)?;
     }
+    if let Some(html) = &args.html {
+        check_html_name(html)?;
+    }
+    let started = Instant::now();
     let data_is_stdout = data_on_stdout(&[
         ("--out", &args.out),
         ("--json", &args.json),
+        ("--html", &args.html),
         ("--save-model", &args.save_model),
     ])?;
     // Data on standard output: the steps go to standard error.
@@ -89,7 +90,7 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
             println!("{line}");
         }
     };
-    let signals = load_signals(&args.ride, &args.source, args.quiet)?;
+    let (signals, origin) = load_ride(&args.ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
@@ -130,18 +131,33 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
             d.gps_noise
         ));
     }
+    let uncertainty = args
+        .out
+        .is_some()
+        .then(|| fit.model().uncertainty(fit.params()))
+        .flatten();
     if let (Some(out), Some(format)) = (&args.out, path_format) {
-        let uncertainty = fit.model().uncertainty(fit.params());
         write_path(out, format, &args.ride, &fit, uncertainty.as_ref())?;
+    }
+    if let Some(html) = &args.html {
+        let contents = gyropath::report::Contents {
+            fit: &fit,
+            origin: Some(&origin),
+            reference: against.as_ref(),
+            uncertainty: uncertainty.as_ref(),
+            history: gyropath::report::ModelRow::of_explanation(&explanation),
+            explanation: Some(&explanation),
+            diagnosis: explanation.last_diagnosis.as_ref(),
+            command: command_line(),
+            elapsed_s: started.elapsed().as_secs_f64(),
+        };
+        write_html(html, &args.ride, &contents)?;
     }
     if let Some(json) = &args.json {
         write_report(json, &args.ride, &explanation)?;
     }
     if let Some(path) = &args.save_model {
-        let saved = SavedModel {
-            source: fit.model().signals.source.clone(),
-            model: fit.model().spec.clone(),
-        };
+        let saved = SavedModel::of(&fit);
         write_report(path, &args.ride, &saved)?;
     }
     Ok(())

@@ -18,7 +18,8 @@ pub struct FitArgs {
     /// ride); --effects adds to it. Example: `--model sensor.json`.
     #[arg(long)]
     pub model: Option<PathBuf>,
-    /// Batch mode: write RIDE-path.csv and RIDE-report.json for every ride here.
+    /// Batch mode: write RIDE-path.csv, RIDE-report.json and RIDE-report.html
+    /// for every ride here, and index.html linking the reports.
     #[arg(long)]
     pub out_dir: Option<PathBuf>,
     /// Write the reconstructed path here, in the format its extension names:
@@ -30,6 +31,11 @@ pub struct FitArgs {
     /// is an older name for it.
     #[arg(long, alias = "report")]
     pub json: Option<PathBuf>,
+    /// Write a report to share here: one HTML file that opens offline in any
+    /// browser (the ride, its checks, the map, residuals, bias, parameters
+    /// with their 1-sigma, the reference when given, the settings).
+    #[arg(long)]
+    pub html: Option<PathBuf>,
     /// A better track of the same drive to measure the path against (RTK, an
     /// INS): `t_s,lat_deg,lon_deg[,alt_m]` CSV on the ride's clock. In a batch
     /// a file name that does not exist is looked up beside each ride
@@ -106,8 +112,15 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let Some(rep) = &args.json {
         check_report_name(rep)?;
     }
-    let data_is_stdout = data_on_stdout(&[("--out", &args.out), ("--json", &args.json)])?;
-    let signals = load_signals(ride, &args.source, args.quiet)?;
+    if let Some(html) = &args.html {
+        check_html_name(html)?;
+    }
+    let data_is_stdout = data_on_stdout(&[
+        ("--out", &args.out),
+        ("--json", &args.json),
+        ("--html", &args.html),
+    ])?;
+    let (signals, origin) = load_ride(ride, &args.source, args.quiet)?;
     if !args.quiet {
         for w in &signals.warnings {
             eprintln!("warning: {w}");
@@ -145,6 +158,20 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     }
     if let Some(rep) = &args.json {
         write_report(rep, ride, &report)?;
+    }
+    if let Some(html) = &args.html {
+        let contents = gyropath::report::Contents {
+            fit: &fit,
+            origin: Some(&origin),
+            reference: against.as_ref(),
+            uncertainty: uncertainty.as_ref(),
+            history: Vec::new(),
+            explanation: None,
+            diagnosis: None,
+            command: command_line(),
+            elapsed_s: report.elapsed_s,
+        };
+        write_html(html, ride, &contents)?;
     }
     if !args.quiet {
         // Data on standard output: the summary goes to standard error.

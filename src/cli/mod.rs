@@ -13,8 +13,8 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use gyropath::diagnosis::{Diagnosis, Folds, describe_estimates};
 use gyropath::export::{
-    FitReport, PathFormat, check_report_name, is_stdout, write_atomically, write_json,
-    write_path_csv, write_path_gpx, write_path_tum,
+    FitReport, PathFormat, check_html_name, check_report_name, is_stdout, write_atomically,
+    write_json, write_path_csv, write_path_gpx, write_path_tum,
 };
 use gyropath::import::{ImportOptions, Imported, Level, MountChoice, TopicChoice};
 use gyropath::model::{DEFAULT_BIAS_WALK, Increment, ModelSpec};
@@ -293,11 +293,45 @@ impl SettingsArgs {
 /// Read any input, say where it came from and what the checks found (unless
 /// quiet), and derive its signals.
 pub fn load_signals(path: &Path, source: &SourceArgs, quiet: bool) -> Result<Arc<Signals>> {
+    Ok(load_ride(path, source, quiet)?.0)
+}
+
+/// [`load_signals`], with where the ride came from and what its checks
+/// said (for the HTML report).
+pub fn load_ride(
+    path: &Path,
+    source: &SourceArgs,
+    quiet: bool,
+) -> Result<(Arc<Signals>, pipeline::Origin)> {
     let imported = pipeline::open(path, &source.options()?)?;
     if !quiet {
         describe_source(&imported);
     }
-    Ok(pipeline::signals(imported)?)
+    let origin = pipeline::Origin::of(&imported);
+    Ok((pipeline::signals(imported)?, origin))
+}
+
+/// The command line as typed, to print on a report ("gyropath fit ride.csv
+/// --html r.html"); arguments with spaces or quotes are single-quoted.
+fn command_line() -> String {
+    std::env::args()
+        .enumerate()
+        .map(|(i, a)| {
+            let a = if i == 0 { "gyropath".to_string() } else { a };
+            if a.is_empty() || a.contains(|c: char| c.is_whitespace() || "'\"$`\\".contains(c)) {
+                format!("'{}'", a.replace('\'', "'\\''"))
+            } else {
+                a
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Write the HTML report of `contents` to `out`.
+fn write_html(out: &Path, ride: &Path, contents: &gyropath::report::Contents) -> Result<()> {
+    gyropath::report::write(out, Some(ride), contents)
+        .context("the HTML report could not be written")
 }
 
 /// One or two lines on stderr: what was read, from which topics, mounted how.

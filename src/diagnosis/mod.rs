@@ -7,6 +7,7 @@ pub mod reference;
 pub mod residuals;
 pub mod structure;
 pub mod validation;
+pub mod view;
 pub mod whiteness;
 
 pub use ranking::{
@@ -17,6 +18,7 @@ pub use reference::{ErrorStats, ReferenceComparison, ReferenceError};
 pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
 pub use validation::{Folds, HeldOut, HeldOutRms, held_out, held_out_rms};
+pub use view::FitView;
 pub use whiteness::{Whiteness, whiteness};
 
 use crate::effects::DEG_PER_RAD;
