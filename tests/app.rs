@@ -532,6 +532,29 @@ fn a_reference_track_is_drawn_and_the_history_says_how_far_each_model_is_from_it
         "the map's legend"
     );
 
+    // File > Save report (HTML): the page has the reference, the model
+    // history the app shows, and the ride's checks.
+    let dir = tempfile::tempdir().expect("temp dir");
+    let page = dir.path().join("comma.html");
+    h.state()
+        .export_to(gyropath::app::worker::ExportKind::ReportHtml, page.clone());
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .status
+            .as_ref()
+            .is_some_and(|s| s.contains("comma.html"))),
+        "the report was not written: {:?}",
+        h.state().error
+    );
+    let html = std::fs::read_to_string(&page).expect("report");
+    assert!(html.contains(r#"<h2 id="reference">Against the reference</h2>"#));
+    assert!(
+        html.contains(&format!("{to_ref:.3} m")),
+        "the history's error to the reference"
+    );
+    assert!(html.contains(r#"<table id="checks">"#), "the ride's checks");
+    assert!(html.contains("the gyropath app on"));
+
     // A reference of another drive is refused with its reason, and the ride stays.
     let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("../shared/real/smartloc-berlin-potsdamer-platz/truth.csv");

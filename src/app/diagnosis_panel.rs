@@ -2,8 +2,9 @@
 //! they save, each with its estimate and an Add button.
 
 use super::worker::RideSource;
-use super::{Command, GyropathApp, short_model};
+use super::{Command, GyropathApp};
 use crate::diagnosis::describe_estimates;
+use crate::effects::short_model;
 
 impl GyropathApp {
     pub(super) fn diagnosis_ui(&mut self, ui: &mut egui::Ui, commands: &mut Vec<Command>) {

@@ -1,7 +1,8 @@
 //! The model history panel: every finished fit with its fit and held-out
 //! error, charted so the error can be watched falling.
 
-use super::{GyropathApp, plots, short_model};
+use super::{GyropathApp, plots};
+use crate::effects::short_model;
 
 impl GyropathApp {
     pub(super) fn history_ui(&mut self, ui: &mut egui::Ui) {

@@ -60,6 +60,7 @@ impl GyropathApp {
                     ("Export path (GPX)...", ExportKind::PathGpx),
                     ("Export path (TUM, for evo)...", ExportKind::PathTum),
                     ("Export fit report (JSON)...", ExportKind::ReportJson),
+                    ("Save report (HTML)...", ExportKind::ReportHtml),
                 ] {
                     if ui.add_enabled(fitted, egui::Button::new(label)).clicked() {
                         commands.push(Command::PickExport(kind));

@@ -29,9 +29,10 @@ use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender};
 
 use crate::diagnosis::HeldOutRms;
-use crate::effects;
 use crate::optimisation::{FitSettings, Phase};
-use worker::{ExportKind, Request, RideSource, RideView, Snapshot, Update, WorkerHandle};
+use worker::{
+    ExportKind, ReportExtras, Request, RideSource, RideView, Snapshot, Update, WorkerHandle,
+};
 
 /// The bundled sample ride (the one the app opens first).
 pub const SAMPLE_RIDE: &[u8] = include_bytes!("../../data/sample-ride.csv");
@@ -328,7 +329,7 @@ impl GyropathApp {
             match p {
                 Picked::Ride(path) => self.apply(Command::Open(RideSource::file(path))),
                 Picked::Reference(path) => self.apply(Command::OpenReference(path)),
-                Picked::Export(kind, path) => self.worker.send(Request::Export(kind, path)),
+                Picked::Export(kind, path) => self.export_to(kind, path),
             }
         }
     }
@@ -407,6 +408,7 @@ impl GyropathApp {
                     ExportKind::PathGpx => ("GPX track", "gpx"),
                     ExportKind::PathTum => ("TUM trajectory", "tum"),
                     ExportKind::ReportJson => ("fit report", "json"),
+                    ExportKind::ReportHtml => ("report (HTML)", "html"),
                 };
                 let stem = self.export_stem();
                 spawn_dialog(move || {
@@ -470,7 +472,32 @@ impl GyropathApp {
 
     /// Export to a chosen path without a dialog (scripts and tests).
     pub fn export_to(&self, kind: ExportKind, path: PathBuf) {
-        self.worker.send(Request::Export(kind, path));
+        let extras = match kind {
+            ExportKind::ReportHtml => self.report_extras(),
+            _ => ReportExtras::default(),
+        };
+        self.worker
+            .send(Request::Export(kind, path, Box::new(extras)));
+    }
+
+    /// The model history, and the diagnosis when it is of the current model.
+    fn report_extras(&self) -> ReportExtras {
+        let current = self.snapshot.as_ref().map(|s| &s.effects);
+        ReportExtras {
+            history: self
+                .history
+                .iter()
+                .map(|r| crate::report::ModelRow {
+                    model: r.model.clone(),
+                    note: format!("segments of {:.1} s, {} parameters", r.segment_s, r.params),
+                    fit_rms_m: r.fit_rms_m,
+                    gps_noise: r.gps_noise.clone(),
+                    heldout_rms_m: r.held_out.map(|h| h.rms_m),
+                    reference_rms_m: r.reference_rms_m,
+                })
+                .collect(),
+            diagnosis: self.diagnosis.clone().filter(|d| Some(&d.model) == current),
+        }
     }
 
     /// Draw the whole window and apply what the user did.
@@ -548,24 +575,6 @@ fn spawn_dialog(f: impl FnOnce() + Send + 'static) {
     let _ = std::thread::Builder::new()
         .name("file-dialog".into())
         .spawn(f);
-}
-
-/// The model's effect list with the paper's five said once.
-fn short_model(model: &str) -> String {
-    let ids: Vec<&str> = model.split(", ").collect();
-    if effects::PAPER.iter().all(|p| ids.contains(p)) {
-        let extra: Vec<&str> = ids
-            .into_iter()
-            .filter(|i| !effects::PAPER.contains(i) && *i != "baro_offset")
-            .collect();
-        if extra.is_empty() {
-            "paper".to_string()
-        } else {
-            format!("paper + {}", extra.join(" + "))
-        }
-    } else {
-        model.to_string()
-    }
 }
 
 /// Open the app window on `ride` (the bundled sample when `None`).

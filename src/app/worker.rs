@@ -61,6 +61,16 @@ pub enum ExportKind {
     /// A TUM trajectory (for evo).
     PathTum,
     ReportJson,
+    /// The HTML report to share.
+    ReportHtml,
+}
+
+/// What the UI knows that a report shows: the model history and the
+/// diagnosis of the current model (the worker has the fit and the ride).
+#[derive(Clone, Debug, Default)]
+pub struct ReportExtras {
+    pub history: Vec<crate::report::ModelRow>,
+    pub diagnosis: Option<Diagnosis>,
 }
 
 /// UI -> worker.
@@ -73,7 +83,7 @@ pub enum Request {
     /// Start the fit again from the start guess with the current settings.
     Reset,
     Settings(FitSettings),
-    Export(ExportKind, PathBuf),
+    Export(ExportKind, PathBuf, Box<ReportExtras>),
     /// Rank the effects the current model lacks (runs beside the fit).
     Diagnose,
     /// Measure the fit against a reference track of the loaded ride.
@@ -255,6 +265,8 @@ struct LoadedRide {
     fit: Option<Reconstruction>,
     /// A reference track of this ride, matched to its rows.
     reference: Option<Arc<(ReferenceTrack, Matched)>>,
+    /// Where it came from and what the checks said (for a report).
+    origin: Origin,
 }
 
 struct Worker {
@@ -358,7 +370,7 @@ impl Worker {
                 self.send(Update::Running(false));
             }
             Request::Settings(settings) => self.apply_settings(settings),
-            Request::Export(kind, path) => self.export(kind, &path),
+            Request::Export(kind, path, extras) => self.export(kind, &path, &extras),
             Request::Diagnose => self.diagnose_in_background(),
             Request::LoadReference(path) => self.load_reference(&path),
             Request::Shutdown => {}
@@ -385,13 +397,16 @@ impl Worker {
         };
         self.running = false;
         self.send(Update::Loaded(Box::new(ride_view(
-            &source, &signals, origin,
+            &source,
+            &signals,
+            origin.clone(),
         ))));
         self.ride = Some(LoadedRide {
             source,
             signals,
             fit: None,
             reference: None,
+            origin,
         });
         self.restart_fit();
         self.send(Update::Running(false));
@@ -563,7 +578,7 @@ impl Worker {
         self.send(Update::Snapshot(Box::new(snap)));
     }
 
-    fn export(&self, kind: ExportKind, path: &std::path::Path) {
+    fn export(&self, kind: ExportKind, path: &std::path::Path, extras: &ReportExtras) {
         let (Some(ride), Some(fit)) = (self.ride.as_ref(), self.fit()) else {
             self.send(Update::Error("nothing to export: no ride is fitted".into()));
             return;
@@ -591,6 +606,30 @@ impl Worker {
                 // The command line's report: sigmas, and the reference when one is loaded.
                 let (report, _) = pipeline::report(fit, 0.0, false, ride.reference.as_deref());
                 write_atomically(path, protect, |w| write_json(w, &report))
+            }
+            ExportKind::ReportHtml => {
+                let contents = crate::report::Contents {
+                    fit,
+                    origin: Some(&ride.origin),
+                    reference: ride.reference.as_deref(),
+                    uncertainty: None,
+                    history: extras.history.clone(),
+                    explanation: None,
+                    diagnosis: extras.diagnosis.as_ref(),
+                    command: format!(
+                        "the gyropath app on {} (settings below)",
+                        ride.source.name()
+                    ),
+                    elapsed_s: 0.0,
+                };
+                match crate::report::write(path, protect, &contents) {
+                    Ok(()) => Ok(()),
+                    Err(crate::report::ReportError::Export(e)) => Err(e),
+                    Err(e) => {
+                        self.send(Update::Error(e.to_string()));
+                        return;
+                    }
+                }
             }
         };
         match result {

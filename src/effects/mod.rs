@@ -348,3 +348,23 @@ mod tests {
         ));
     }
 }
+
+/// A model's effect list ("initial_position, ..., gps_lag") with the
+/// paper's five said once: "paper + gps_lag" (a barometer's offset, which
+/// comes with the data, is left out); other lists as they are.
+pub fn short_model(model: &str) -> String {
+    let ids: Vec<&str> = model.split(", ").collect();
+    if PAPER.iter().all(|p| ids.contains(p)) {
+        let extra: Vec<&str> = ids
+            .into_iter()
+            .filter(|i| !PAPER.contains(i) && *i != "baro_offset")
+            .collect();
+        if extra.is_empty() {
+            "paper".to_string()
+        } else {
+            format!("paper + {}", extra.join(" + "))
+        }
+    } else {
+        model.to_string()
+    }
+}

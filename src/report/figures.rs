@@ -378,11 +378,12 @@ pub fn history(rows: &[ModelRow]) -> Option<Figure> {
     });
     let (_, hi) = extent(values.chain([0.0]), 0.08)?;
     let n = rows.len() as f64;
-    let mut s = Svg::new(
-        Frame::new(WIDTH, HEIGHT, (-0.3, n - 0.7), (0.0, hi)),
-        "Model history",
-    );
-    s.axes("model (0 = first)", "RMS (m)");
+    let frame = Frame {
+        whole_x: true,
+        ..Frame::new(WIDTH, HEIGHT, (-0.3, n - 0.7), (0.0, hi))
+    };
+    let mut s = Svg::new(frame, "Model history");
+    s.axes("model (# of the table)", "RMS (m)");
     let series = |f: &dyn Fn(&ModelRow) -> Option<f64>| -> Vec<(f64, f64)> {
         rows.iter()
             .enumerate()

@@ -290,7 +290,7 @@ pub fn page(c: &Contents) -> Page {
         history: history
             .iter()
             .map(|h| HistoryView {
-                model: h.model.clone(),
+                model: crate::effects::short_model(&h.model),
                 note: h.note.clone(),
                 fit: format!("{} (under {})", m(h.fit_rms_m), h.gps_noise),
                 heldout: opt_m(h.heldout_rms_m),

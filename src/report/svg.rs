@@ -31,6 +31,8 @@ pub struct Frame {
     pub height: f64,
     pub x: (f64, f64),
     pub y: (f64, f64),
+    /// Ticks on x only at whole numbers (a count, not a measure).
+    pub whole_x: bool,
 }
 
 impl Frame {
@@ -41,6 +43,7 @@ impl Frame {
             height,
             x: usable(x),
             y: usable(y),
+            whole_x: false,
         }
     }
 
@@ -59,6 +62,7 @@ impl Frame {
             height,
             x: widen(x, w),
             y: widen(y, h),
+            whole_x: false,
         }
     }
 
@@ -248,7 +252,12 @@ impl Svg {
             n(w),
             n(h)
         );
-        let xt = nice_ticks(f.x.0, f.x.1, (w / 90.0).max(2.0) as usize);
+        let mut xt = nice_ticks(f.x.0, f.x.1, (w / 90.0).max(2.0) as usize);
+        if f.whole_x {
+            xt = (f.x.0.ceil() as i64..=f.x.1.floor() as i64)
+                .map(|i| i as f64)
+                .collect();
+        }
         let yt = nice_ticks(f.y.0, f.y.1, (h / 45.0).max(2.0) as usize);
         let step = |t: &[f64]| if t.len() > 1 { t[1] - t[0] } else { 1.0 };
         for &x in &xt {
