@@ -88,6 +88,18 @@ fn band(input: &Input) -> Vec<[f64; 6]> {
         .collect()
 }
 
+/// The map's size (px) for data `dx` by `dy` metres: as large as the page
+/// allows at one scale for both axes, so a drive along one street is a
+/// narrow picture rather than a line in an empty square.
+fn map_size(dx: f64, dy: f64) -> (f64, f64) {
+    let (mx, my) = (WIDTH - 70.0, MAP_HEIGHT - 60.0);
+    let scale = (mx / dx.max(1e-9)).min(my / dy.max(1e-9));
+    (
+        (dx * scale + 70.0).clamp(360.0, WIDTH),
+        (dy * scale + 60.0).clamp(260.0, MAP_HEIGHT),
+    )
+}
+
 fn in_any(t: f64, spans: &[(f64, f64)]) -> bool {
     spans.iter().any(|&(a, b)| t > a && t < b)
 }
@@ -110,12 +122,12 @@ fn map(input: &Input, band: &[[f64; 6]]) -> Figure {
         .map(|f| f.en[1])
         .chain(path.iter().map(|p| p[2]))
         .chain(reference.iter().map(|p| p.1));
-    let frame = Frame::equal_aspect(
-        WIDTH,
-        MAP_HEIGHT,
+    let (x, y) = (
         extent(xs, 0.03).unwrap_or((0.0, 1.0)),
         extent(ys, 0.03).unwrap_or((0.0, 1.0)),
     );
+    let (width, height) = map_size(x.1 - x.0, y.1 - y.0);
+    let frame = Frame::equal_aspect(width, height, x, y);
     let mut s = Svg::new(
         frame,
         "Map: GPS fixes, reconstructed path and its 95 % band",
@@ -161,7 +173,7 @@ fn map(input: &Input, band: &[[f64; 6]]) -> Figure {
     if !reference.is_empty() {
         legend.push(("reference", "reference"));
     }
-    s.legend(&legend);
+    s.legend_inside(&legend);
     let widest = band.iter().map(|b| b[3]).fold(0.0, f64::max);
     Figure {
         id: "map".into(),

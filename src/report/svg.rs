@@ -427,6 +427,24 @@ impl Svg {
         }
     }
 
+    /// A legend down the top-left corner of the plotting area (a map's,
+    /// whose corners are mostly empty and whose width varies).
+    pub fn legend_inside(&mut self, entries: &[(&str, &str)]) {
+        let mut y = TOP + 16.0;
+        for (class, label) in entries {
+            _ = write!(
+                self.out,
+                r#"<path class="{class} key" d="M{x0} {py}h18"/><text class="legend" x="{tx}" y="{ty}">{l}</text>"#,
+                x0 = n(LEFT + 8.0),
+                py = n(y - 4.0),
+                tx = n(LEFT + 31.0),
+                ty = n(y),
+                l = escape(label)
+            );
+            y += 16.0;
+        }
+    }
+
     /// The finished `<svg>` element.
     pub fn finish(mut self) -> String {
         self.out.push_str("</svg>");
