@@ -81,7 +81,7 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .clone();
     assert!(law.contains("GPS"), "{law}");
     h.get_by_label(&law);
-    // The finished fit says how sure it is: ellipses along the path, a band on
+    // The finished fit says how sure it is: a band along the path, a band on
     // the biases, every parameter with its sigma.
     let snap = h.state().snapshot.as_ref().expect("snapshot");
     let sigma = snap.sigma.as_ref().expect("a finished fit has its sigmas");

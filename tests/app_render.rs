@@ -31,7 +31,7 @@ fn changed(
 }
 
 #[test]
-fn the_sigma_band_and_ellipses_are_drawn() {
+fn the_path_band_and_the_bias_band_are_drawn() {
     let app = GyropathApp::new(AppSettings::default(), sample_ride(), || {});
     let mut h = Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
@@ -67,13 +67,13 @@ fn the_sigma_band_and_ellipses_are_drawn() {
     without
         .save(dir.join("app_without_sigma.png"))
         .expect("save");
-    // Map (the middle column, above the model history): the 95 % ellipses along the path.
+    // Map (the middle column, above the model history): the 95 % band along the path.
     let map = changed(&with, &without, 0.29..0.63, 0.05..0.75);
     // Bias plot (the right column, between the cost and the residual plots):
     // the +-1 sigma band about each axis.
     let plots = changed(&with, &without, 0.65..1.0, 0.32..0.52);
     eprintln!("pixels changed: map {map}, bias plot {plots}");
-    assert!(map > 1000, "ellipses: {map} pixels changed");
+    assert!(map > 1000, "path band: {map} pixels changed");
     assert!(plots > 1000, "bias band: {plots} pixels changed");
 }
 

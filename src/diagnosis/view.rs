@@ -48,6 +48,73 @@ pub fn peaks(series: &[(f64, f64)], n: usize) -> Vec<(f64, f64)> {
         .collect()
 }
 
+/// z of the two-sided 95 % interval of a normal error.
+pub const Z95: f64 = 1.959_964;
+
+/// One point of the path's 95 % band: the path there, its normal (unit,
+/// to the left of travel) and the band's half-width across the track.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BandPoint {
+    /// Log time (s), east and north (m).
+    pub t: f64,
+    pub east: f64,
+    pub north: f64,
+    pub normal: [f64; 2],
+    /// `1.96 sigma_cross` (m), with `sigma_cross^2 = n' S n` for the
+    /// east-north covariance `S` and the normal `n`.
+    pub half_width_m: f64,
+}
+
+impl BandPoint {
+    /// The band's left and right edges here (east, north).
+    pub fn edges(&self) -> [[f64; 2]; 2] {
+        let w = self.half_width_m;
+        [
+            [
+                self.east + w * self.normal[0],
+                self.north + w * self.normal[1],
+            ],
+            [
+                self.east - w * self.normal[0],
+                self.north - w * self.normal[1],
+            ],
+        ]
+    }
+}
+
+/// The 95 % band across the path at each point of `path` (log time, east,
+/// north), from the east-north covariance there (`[var_e, var_n, cov_en]`,
+/// m^2, same length). The direction of travel is that from the point before
+/// to the point after; standing still, the last one. Empty when the lengths
+/// differ.
+pub fn cross_band(path: &[[f64; 3]], cov: &[[f64; 3]]) -> Vec<BandPoint> {
+    if cov.len() != path.len() || path.len() < 2 {
+        return Vec::new();
+    }
+    let mut normal = [0.0, 1.0];
+    (0..path.len())
+        .map(|i| {
+            let (a, b) = (path[i.saturating_sub(1)], path[(i + 1).min(path.len() - 1)]);
+            let (de, dn) = (b[1] - a[1], b[2] - a[2]);
+            let len = de.hypot(dn);
+            if len > 1e-6 {
+                normal = [-dn / len, de / len];
+            }
+            let [ve, vn, c] = cov[i];
+            let var = normal[0] * normal[0] * ve
+                + 2.0 * normal[0] * normal[1] * c
+                + normal[1] * normal[1] * vn;
+            BandPoint {
+                t: path[i][0],
+                east: path[i][1],
+                north: path[i][2],
+                normal,
+                half_width_m: Z95 * var.max(0.0).sqrt(),
+            }
+        })
+        .collect()
+}
+
 /// What is drawn of a fit.
 pub struct FitView {
     /// The rows drawn, and the path there: log time, east, north (m).
@@ -98,6 +165,22 @@ mod tests {
         assert!(r.len() <= 4001);
         assert_eq!((r[0], *r.last().unwrap()), (0, 10_000));
         assert_eq!(decimated_rows(5, 4000), vec![0, 1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn the_band_is_the_cross_track_interval() {
+        // Travel north-east; the error is 2 m (1-sigma) across, 0 along.
+        let path: Vec<[f64; 3]> = (0..5).map(|i| [i as f64, i as f64, i as f64]).collect();
+        let n = [-(0.5f64).sqrt(), (0.5f64).sqrt()];
+        let cov = [n[0] * n[0] * 4.0, n[1] * n[1] * 4.0, n[0] * n[1] * 4.0];
+        let band = cross_band(&path, &[cov; 5]);
+        for b in &band {
+            assert!((b.half_width_m - Z95 * 2.0).abs() < 1e-9, "{b:?}");
+            assert!((b.normal[0] - n[0]).abs() < 1e-12 && (b.normal[1] - n[1]).abs() < 1e-12);
+        }
+        let [l, r] = band[2].edges();
+        assert!((l[0] - r[0] + 2.0 * Z95 * 2.0 * (0.5f64).sqrt()).abs() < 1e-9);
+        assert!(cross_band(&path, &[cov]).is_empty());
     }
 
     #[test]

@@ -7,7 +7,7 @@
 
 use crate::diagnosis::FitView;
 use crate::diagnosis::ReferenceComparison;
-use crate::diagnosis::view::{OUTAGE_S, outages};
+use crate::diagnosis::view::{BandPoint, OUTAGE_S, cross_band, outages};
 use crate::model::Uncertainty;
 use crate::pipeline::MatchedReference;
 
@@ -18,10 +18,6 @@ use super::{Figure, ModelRow};
 const WIDTH: f64 = 920.0;
 const HEIGHT: f64 = 260.0;
 const MAP_HEIGHT: f64 = 620.0;
-
-/// z of the two-sided 95 % interval of a normal error: the band's half-width
-/// is `1.96 sigma_cross`.
-const Z95: f64 = 1.959_964;
 
 /// What the figures are drawn from.
 pub struct Input<'a> {
@@ -51,41 +47,12 @@ pub fn all(input: &Input) -> Vec<Figure> {
     figures
 }
 
-/// The 95 % band across the path at each drawn row: `(t, east, north,
-/// half-width, normal east, normal north)`, from the east-north covariance
-/// `S` projected on the path's normal `n`: `sigma_cross^2 = n' S n`.
-fn band(input: &Input) -> Vec<[f64; 6]> {
-    let Some(u) = input.uncertainty else {
-        return Vec::new();
-    };
-    let p = &input.view.path;
-    if u.path.len() != p.len() || p.len() < 2 {
-        return Vec::new();
-    }
-    let mut normal = [0.0, 1.0];
-    (0..p.len())
-        .map(|i| {
-            let (a, b) = (p[i.saturating_sub(1)], p[(i + 1).min(p.len() - 1)]);
-            let (de, dn) = (b[1] - a[1], b[2] - a[2]);
-            let len = de.hypot(dn);
-            // Standing still: keep the last direction of travel.
-            if len > 1e-6 {
-                normal = [-dn / len, de / len];
-            }
-            let [ve, vn, _, c] = u.path[i];
-            let var = normal[0] * normal[0] * ve
-                + 2.0 * normal[0] * normal[1] * c
-                + normal[1] * normal[1] * vn;
-            [
-                p[i][0],
-                p[i][1],
-                p[i][2],
-                Z95 * var.max(0.0).sqrt(),
-                normal[0],
-                normal[1],
-            ]
-        })
-        .collect()
+/// The 95 % band across the path at each drawn row (see [`cross_band`]).
+fn band(input: &Input) -> Vec<BandPoint> {
+    input.uncertainty.map_or(Vec::new(), |u| {
+        let cov: Vec<[f64; 3]> = u.path.iter().map(|v| [v[0], v[1], v[3]]).collect();
+        cross_band(&input.view.path, &cov)
+    })
 }
 
 /// The map's size (px) for data `dx` by `dy` metres: as large as the page
@@ -104,7 +71,7 @@ fn in_any(t: f64, spans: &[(f64, f64)]) -> bool {
     spans.iter().any(|&(a, b)| t > a && t < b)
 }
 
-fn map(input: &Input, band: &[[f64; 6]]) -> Figure {
+fn map(input: &Input, band: &[BandPoint]) -> Figure {
     let sig = &input.model.signals;
     let path = &input.view.path;
     let reference: Vec<(f64, f64)> = input.reference.map_or(Vec::new(), |(_, m)| {
@@ -136,11 +103,8 @@ fn map(input: &Input, band: &[[f64; 6]]) -> Figure {
     let edges: Vec<_> = band
         .iter()
         .map(|b| {
-            let (w, n) = (b[3], [b[4], b[5]]);
-            (
-                (b[1] + w * n[0], b[2] + w * n[1]),
-                (b[1] - w * n[0], b[2] - w * n[1]),
-            )
+            let [l, r] = b.edges();
+            ((l[0], l[1]), (r[0], r[1]))
         })
         .collect();
     s.band(&edges, "band");
@@ -174,7 +138,7 @@ fn map(input: &Input, band: &[[f64; 6]]) -> Figure {
         legend.push(("reference", "reference"));
     }
     s.legend_inside(&legend);
-    let widest = band.iter().map(|b| b[3]).fold(0.0, f64::max);
+    let widest = band.iter().map(|b| b.half_width_m).fold(0.0, f64::max);
     Figure {
         id: "map".into(),
         title: "Map".into(),
@@ -292,11 +256,11 @@ fn reference_error(input: &Input) -> Option<Figure> {
     })
 }
 
-fn uncertainty(input: &Input, band: &[[f64; 6]]) -> Option<Figure> {
+fn uncertainty(input: &Input, band: &[BandPoint]) -> Option<Figure> {
     if band.is_empty() {
         return None;
     }
-    let half: Vec<(f64, f64)> = band.iter().map(|b| (b[0], b[3])).collect();
+    let half: Vec<(f64, f64)> = band.iter().map(|b| (b.t, b.half_width_m)).collect();
     let mut s = time_frame(
         input,
         half.iter().map(|v| v.1).chain([0.0]),

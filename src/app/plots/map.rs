@@ -1,5 +1,5 @@
 //! The map: GPS fixes and the reconstructed path in local metres (equal
-//! aspect), coloured by outage or residual, with the path's 95 % ellipses,
+//! aspect), coloured by outage or residual, over the path's 95 % band,
 //! the time hovered in the other plots, a scale bar and the tile background.
 
 use egui::Color32;
@@ -55,6 +55,10 @@ pub fn map_ui(
             let Some(snap) = snap else {
                 return;
             };
+            // Under the path: the band where the path may be.
+            if let Some(sigma) = &snap.sigma {
+                band_ui(plot, snap, sigma);
+            }
             let in_outage = |t: f64| ride.outages.iter().any(|&(a, b)| t > a && t < b);
             if colour_by_residual && !snap.residuals.is_empty() {
                 let res = &snap.residuals;
@@ -82,9 +86,6 @@ pub fn map_ui(
                     };
                     plot.line(Line::new(name, run).color(colour).width(2.0));
                 }
-            }
-            if let Some(sigma) = &snap.sigma {
-                sigma_ellipses_ui(plot, snap, sigma);
             }
             if let Some(t) = hover_t
                 && let Some(i) = nearest(|k| snap.path[k][0], snap.path.len(), t)
@@ -165,46 +166,31 @@ fn scale_bar_ui(ui: &egui::Ui, transform: &egui_plot::PlotTransform) {
     );
 }
 
-/// How many 95 % ellipses the map draws along the path.
-const ELLIPSES: usize = 80;
+/// At most this many stretches of the band are drawn (each a filled quad:
+/// egui fills convex shapes only, and a band along a winding path is not).
+const BAND_QUADS: usize = 600;
 
-/// The path's 95 % ellipses (chi-square 5.99 with 2 degrees of freedom) at
-/// evenly spaced points: where they grow (outages, the ride's ends) the path
-/// is least sure.
-fn sigma_ellipses_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView) {
-    let n = snap.path.len().min(sigma.path.len());
-    let step = n.div_ceil(ELLIPSES).max(1);
-    for i in (0..n).step_by(step) {
-        let [ve, vn, c] = sigma.path[i];
-        let Some(loop_) = ellipse(snap.path[i][1], snap.path[i][2], ve, vn, c, 5.991) else {
-            continue;
-        };
-        plot.line(Line::new("95 % ellipse", loop_).color(SIGMA).width(1.0));
+/// The path's 95 % band across the track (`diagnosis::view::cross_band`),
+/// filled under the path: it widens where the path is least sure (long
+/// outages, the ride's ends) and is as narrow as the fit says elsewhere.
+fn band_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView) {
+    let band = crate::diagnosis::view::cross_band(&snap.path, &sigma.path);
+    let step = band.len().div_ceil(BAND_QUADS).max(1);
+    let kept: Vec<_> = band
+        .iter()
+        .step_by(step)
+        .chain(band.last())
+        .map(|b| b.edges())
+        .collect();
+    for w in kept.windows(2) {
+        let ([l0, r0], [l1, r1]) = (w[0], w[1]);
+        plot.polygon(
+            egui_plot::Polygon::new("95 % band", vec![l0, l1, r1, r0])
+                .fill_color(SIGMA)
+                .stroke(egui::Stroke::NONE)
+                .allow_hover(false),
+        );
     }
-}
-
-/// The ellipse `d^T C^-1 d = k` around `(x, y)` for the covariance
-/// `C = [[ve, c], [c, vn]]`, as a closed loop; `None` if `C` is not positive.
-pub fn ellipse(x: f64, y: f64, ve: f64, vn: f64, c: f64, k: f64) -> Option<Vec<[f64; 2]>> {
-    // Eigen-decomposition of the symmetric 2x2 matrix.
-    let mean = 0.5 * (ve + vn);
-    let d = (0.25 * (ve - vn).powi(2) + c * c).sqrt();
-    let (l1, l2) = (mean + d, mean - d);
-    if !(l1.is_finite() && l2 > 0.0) {
-        return None;
-    }
-    let angle = 0.5 * (2.0 * c).atan2(ve - vn);
-    let (a, b) = ((k * l1).sqrt(), (k * l2).sqrt());
-    let (sin, cos) = angle.sin_cos();
-    Some(
-        (0..=32)
-            .map(|i| {
-                let t = i as f64 / 32.0 * std::f64::consts::TAU;
-                let (u, v) = (a * t.cos(), b * t.sin());
-                [x + u * cos - v * sin, y + u * sin + v * cos]
-            })
-            .collect(),
-    )
 }
 
 #[cfg(test)]
@@ -223,25 +209,5 @@ mod tests {
         }
         assert_eq!(scale_bar(0.0), None);
         assert_eq!(scale_bar(f64::NAN), None);
-    }
-
-    #[test]
-    fn ellipses_have_the_covariance_axes() {
-        // Axis-aligned: semi-axes 2 sqrt(k) east, sqrt(k) north.
-        let e = ellipse(10.0, 20.0, 4.0, 1.0, 0.0, 9.0).unwrap();
-        let max_e = e.iter().map(|p| (p[0] - 10.0).abs()).fold(0.0, f64::max);
-        let max_n = e.iter().map(|p| (p[1] - 20.0).abs()).fold(0.0, f64::max);
-        assert!(
-            (max_e - 6.0).abs() < 1e-9 && (max_n - 3.0).abs() < 0.05,
-            "{max_e} {max_n}"
-        );
-        // Correlated: every point satisfies d^T C^-1 d = k.
-        let (ve, vn, c) = (2.0, 1.0, 0.8);
-        for p in ellipse(0.0, 0.0, ve, vn, c, 5.991).unwrap() {
-            let det = ve * vn - c * c;
-            let m = (vn * p[0] * p[0] - 2.0 * c * p[0] * p[1] + ve * p[1] * p[1]) / det;
-            assert!((m - 5.991).abs() < 1e-9, "{m}");
-        }
-        assert!(ellipse(0.0, 0.0, 1.0, 1.0, 2.0, 1.0).is_none());
     }
 }
