@@ -609,18 +609,19 @@ impl Worker {
             }
             ExportKind::ReportHtml => {
                 let contents = crate::report::Contents {
-                    fit,
-                    origin: Some(&ride.origin),
-                    reference: ride.reference.as_deref(),
-                    uncertainty: None,
                     history: extras.history.clone(),
-                    explanation: None,
                     diagnosis: extras.diagnosis.as_ref(),
-                    command: format!(
-                        "the gyropath app on {} (settings below)",
-                        ride.source.name()
-                    ),
-                    elapsed_s: 0.0,
+                    ..crate::report::Contents::of_fit(
+                        fit,
+                        Some(&ride.origin),
+                        ride.reference.as_deref(),
+                        None,
+                        format!(
+                            "the gyropath app on {} (settings below)",
+                            ride.source.name()
+                        ),
+                        0.0,
+                    )
                 };
                 match crate::report::write(path, protect, &contents) {
                     Ok(()) => Ok(()),

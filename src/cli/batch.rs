@@ -135,18 +135,15 @@ fn fit_one(
             uncertainty.as_ref(),
         )?;
         write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
-        let contents = gyropath::report::Contents {
-            fit: &fit,
-            origin: Some(&origin),
-            reference: against.as_ref(),
-            uncertainty: uncertainty.as_ref(),
-            history: Vec::new(),
-            explanation: None,
-            diagnosis: None,
-            command: command_line(),
-            elapsed_s: report.elapsed_s,
-        };
-        write_html(&dir.join(format!("{stem}-report.html")), ride, &contents)?;
+        write_fit_html(
+            &dir.join(format!("{stem}-report.html")),
+            ride,
+            &fit,
+            &origin,
+            against.as_ref(),
+            uncertainty.as_ref(),
+            report.elapsed_s,
+        )?;
     }
     Ok(report)
 }

@@ -141,15 +141,17 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
     }
     if let Some(html) = &args.html {
         let contents = gyropath::report::Contents {
-            fit: &fit,
-            origin: Some(&origin),
-            reference: against.as_ref(),
-            uncertainty: uncertainty.as_ref(),
             history: gyropath::report::ModelRow::of_explanation(&explanation),
             explanation: Some(&explanation),
             diagnosis: explanation.last_diagnosis.as_ref(),
-            command: command_line(),
-            elapsed_s: started.elapsed().as_secs_f64(),
+            ..gyropath::report::Contents::of_fit(
+                &fit,
+                Some(&origin),
+                against.as_ref(),
+                uncertainty.as_ref(),
+                command_line(),
+                started.elapsed().as_secs_f64(),
+            )
         };
         write_html(html, &args.ride, &contents)?;
     }

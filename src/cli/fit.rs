@@ -160,18 +160,15 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         write_report(rep, ride, &report)?;
     }
     if let Some(html) = &args.html {
-        let contents = gyropath::report::Contents {
-            fit: &fit,
-            origin: Some(&origin),
-            reference: against.as_ref(),
-            uncertainty: uncertainty.as_ref(),
-            history: Vec::new(),
-            explanation: None,
-            diagnosis: None,
-            command: command_line(),
-            elapsed_s: report.elapsed_s,
-        };
-        write_html(html, ride, &contents)?;
+        write_fit_html(
+            html,
+            ride,
+            &fit,
+            &origin,
+            against.as_ref(),
+            uncertainty.as_ref(),
+            report.elapsed_s,
+        )?;
     }
     if !args.quiet {
         // Data on standard output: the summary goes to standard error.

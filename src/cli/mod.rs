@@ -328,6 +328,27 @@ fn command_line() -> String {
         .join(" ")
 }
 
+/// Write the HTML report of a plain fit (`fit --html`, a batch's pages).
+fn write_fit_html(
+    out: &Path,
+    ride: &Path,
+    fit: &Reconstruction,
+    origin: &pipeline::Origin,
+    against: Option<&pipeline::MatchedReference>,
+    uncertainty: Option<&gyropath::model::Uncertainty>,
+    elapsed_s: f64,
+) -> Result<()> {
+    let contents = gyropath::report::Contents::of_fit(
+        fit,
+        Some(origin),
+        against,
+        uncertainty,
+        command_line(),
+        elapsed_s,
+    );
+    write_html(out, ride, &contents)
+}
+
 /// Write the HTML report of `contents` to `out`.
 fn write_html(out: &Path, ride: &Path, contents: &gyropath::report::Contents) -> Result<()> {
     gyropath::report::write(out, Some(ride), contents)

@@ -118,6 +118,30 @@ pub struct Contents<'a> {
     pub elapsed_s: f64,
 }
 
+impl<'a> Contents<'a> {
+    /// The contents of a plain fit: its own history row, no diagnosis.
+    pub fn of_fit(
+        fit: &'a Reconstruction,
+        origin: Option<&'a Origin>,
+        reference: Option<&'a MatchedReference>,
+        uncertainty: Option<&'a Uncertainty>,
+        command: String,
+        elapsed_s: f64,
+    ) -> Self {
+        Self {
+            fit,
+            origin,
+            reference,
+            uncertainty,
+            history: Vec::new(),
+            explanation: None,
+            diagnosis: None,
+            command,
+            elapsed_s,
+        }
+    }
+}
+
 /// A titled value of a table.
 #[derive(Debug, Serialize)]
 pub struct Item {
