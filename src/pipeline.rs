@@ -26,10 +26,12 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
     import::open(path, options)
 }
 
-/// Read a reference track and match it to `signals`' rows: an error when it
-/// cannot belong to the ride (no time in common, far from every fix).
+/// Read a reference track (CSV on the ride's clock, or GPX / NMEA in UTC put
+/// on it by the ride's `t0_unix_s`) and match it to `signals`' rows: an
+/// error when it cannot belong to the ride (no time in common, far from
+/// every fix).
 pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference, PipelineError> {
-    let track = import::read_reference(path)?;
+    let track = import::read_reference(path)?.on_ride_clock(signals.t0_unix_s, &signals.source)?;
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))
 }

@@ -1131,3 +1131,146 @@ fn a_reader_that_stops_early_ends_the_command_quietly() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// A reference as GPX or NMEA (UTC) measures the same as the same track as
+/// CSV on the ride's clock, once the ride says when it started; without its
+/// start it is refused, naming both files.
+#[test]
+fn gpx_and_nmea_references_are_put_on_the_rides_clock() {
+    const T0: f64 = 1_600_000_000.0; // 2020-09-13 12:26:40 UTC
+    let dir = tempfile::tempdir().unwrap();
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
+    let ride_text = std::fs::read_to_string(data.join("sample-ride.csv")).unwrap();
+    let ride = dir.path().join("ride.csv");
+    std::fs::write(
+        &ride,
+        ride_text.replacen('\n', &format!("\n# t0_unix_s: {T0}\n"), 1),
+    )
+    .unwrap();
+    // The truth at 10 Hz, three ways.
+    let truth = std::fs::read_to_string(data.join("sample-ride-truth.csv")).unwrap();
+    let rows: Vec<[f64; 4]> = truth
+        .lines()
+        .skip_while(|l| !l.starts_with("t_s"))
+        .skip(1)
+        .step_by(10)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            [v[0], v[1], v[2], v[3]]
+        })
+        .collect();
+    let csv: String = std::iter::once("t_s,lat_deg,lon_deg,alt_m\n".to_string())
+        .chain(
+            rows.iter()
+                .map(|r| format!("{},{},{},{}\n", r[0], r[1], r[2], r[3])),
+        )
+        .collect();
+    // UTC calendar of a Unix time (Howard Hinnant's civil_from_days).
+    let civil = |unix: f64| {
+        let days = (unix / 86_400.0).floor() as i64;
+        let z = days + 719_468;
+        let era = z.div_euclid(146_097);
+        let doe = z - era * 146_097;
+        let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+        let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+        let mp = (5 * doy + 2) / 153;
+        let d = doy - (153 * mp + 2) / 5 + 1;
+        let m = if mp < 10 { mp + 3 } else { mp - 9 };
+        let y = yoe + era * 400 + i64::from(m <= 2);
+        let sod = unix - days as f64 * 86_400.0;
+        let (h, mi, s) = (
+            (sod / 3600.0).floor(),
+            (sod % 3600.0 / 60.0).floor(),
+            sod % 60.0,
+        );
+        (y, m, d, h, mi, s)
+    };
+    let gpx: String = std::iter::once(
+        r#"<?xml version="1.0"?><gpx version="1.1" creator="test" xmlns="http://www.topografix.com/GPX/1/1"><trk><trkseg>"#
+            .to_string(),
+    )
+    .chain(rows.iter().map(|r| {
+        let (y, m, d, h, mi, s) = civil(T0 + r[0]);
+        format!(
+            r#"<trkpt lat="{}" lon="{}"><ele>{}</ele><time>{y:04}-{m:02}-{d:02}T{h:02}:{mi:02}:{s:06.3}Z</time></trkpt>"#,
+            r[1], r[2], r[3]
+        )
+    }))
+    .chain(std::iter::once("</trkseg></trk></gpx>".to_string()))
+    .collect();
+    let nmea_angle = |v: f64, pos: char, neg: char, width: usize| {
+        let a = v.abs();
+        let deg = a.floor();
+        format!(
+            "{:0width$}{:010.7},{}",
+            deg as i64,
+            (a - deg) * 60.0,
+            if v >= 0.0 { pos } else { neg }
+        )
+    };
+    let sentence = |body: String| format!("${body}*{:02X}\n", body.bytes().fold(0u8, |a, b| a ^ b));
+    let gga: String = rows
+        .iter()
+        .map(|r| {
+            let (y, m, d, h, mi, s) = civil(T0 + r[0]);
+            sentence(format!(
+                "GPGGA,{h:02}{mi:02}{s:05.2},{},{},1,12,0.8,{:.3},M,0.0,M,,",
+                nmea_angle(r[1], 'N', 'S', 2),
+                nmea_angle(r[2], 'E', 'W', 3),
+                r[3]
+            )) + &sentence(format!(
+                "GPRMC,{h:02}{mi:02}{s:05.2},A,,,,,0.0,0.0,{d:02}{m:02}{:02},,,A",
+                y % 100
+            ))
+        })
+        .collect();
+    let mut rms = Vec::new();
+    for (name, text) in [
+        ("truth.csv", &csv),
+        ("truth.gpx", &gpx),
+        ("truth.gga", &gga),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        let json = dir.path().join(format!("{name}.json"));
+        let out = gyropath(&[
+            "fit",
+            s(&ride),
+            "--reference",
+            s(&path),
+            "--json",
+            s(&json),
+            "--quiet",
+        ]);
+        assert!(
+            out.status.success(),
+            "{name}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+        rms.push(r["reference"]["horizontal"]["rms_m"].as_f64().unwrap());
+        assert!(
+            r["reference"]["covered_s"].as_f64().unwrap() > 590.0,
+            "{name}: {r}"
+        );
+    }
+    eprintln!("to the reference as CSV, GPX, NMEA: {rms:?}");
+    assert!(
+        (rms[1] - rms[0]).abs() < 0.01 && (rms[2] - rms[0]).abs() < 0.01,
+        "{rms:?}"
+    );
+    // The bundled ride has no t0_unix_s: a UTC reference cannot be placed.
+    let out = gyropath(&[
+        "fit",
+        s(&data.join("sample-ride.csv")),
+        "--reference",
+        s(&dir.path().join("truth.gpx")),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("truth.gpx") && err.contains("has no t0_unix_s"),
+        "{err}"
+    );
+}

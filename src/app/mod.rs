@@ -425,7 +425,10 @@ impl GyropathApp {
                 let tx = self.picked_tx.clone();
                 spawn_dialog(move || {
                     if let Some(p) = rfd::FileDialog::new()
-                        .add_filter("reference track (t_s,lat_deg,lon_deg[,alt_m])", &["csv"])
+                        .add_filter(
+                            "reference track (t_s,lat_deg,lon_deg[,alt_m] CSV, GPX, NMEA)",
+                            &["csv", "gpx", "gga", "nmea"],
+                        )
                         .pick_file()
                     {
                         let _ = tx.send(Picked::Reference(p));

@@ -408,6 +408,7 @@ mod tests {
             t_s: Vec::new(),
             points: Vec::new(),
             has_alt: false,
+            clock: crate::import::reference::Clock::Ride,
         };
         model.for_each_pose(theta, |j, _, p| {
             if j % every == 0 {

@@ -2,8 +2,12 @@
 //! survey, a second receiver) to measure a fit against, as evo does for SLAM.
 //!
 //! Read from `t_s,lat_deg,lon_deg[,alt_m]` CSV on the ride's own clock (the
-//! `truth.csv` of the shared real drives and of `gyropath simulate --truth`).
-//! Columns are found by name; `#` lines are comments. Time must increase
+//! `truth.csv` of the shared real drives and of `gyropath simulate --truth`),
+//! from a GPX track (`.gpx`: every track point with its `<time>`, `<ele>`
+//! when given) or from NMEA 0183 (`.gga`, `.nmea`: the GGA sentences of a
+//! fix, dated by the RMC sentences), the last two in UTC: they are put on the
+//! ride's clock by its `t0_unix_s` ([`ReferenceTrack::on_ride_clock`]).
+//! CSV columns are found by name; `#` lines are comments. Time must increase
 //! strictly and every value must be a finite number: anything else is an
 //! error naming the file, the line and the column.
 
@@ -23,6 +27,63 @@ pub struct ReferenceTrack {
     pub points: Vec<Geodetic>,
     /// Whether the reference gives heights.
     pub has_alt: bool,
+    /// What `t_s` counts from.
+    pub clock: Clock,
+}
+
+/// The clock of a reference track's times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Clock {
+    /// The ride's own (`t_s` of the ride log): CSV references.
+    Ride,
+    /// Unix seconds (UTC): GPX, NMEA dated by RMC.
+    Unix,
+    /// Seconds since the UTC midnight of the first point's day, its day
+    /// unknown (NMEA with GGA only, as GNSS/INS exports often are): dated
+    /// by the ride's start.
+    TimeOfDay,
+}
+
+impl ReferenceTrack {
+    /// The track on the clock of a ride whose `t_s = 0` is `t0_unix_s`
+    /// (`t_ride = t_unix - t0_unix_s`); a track already on the ride's clock
+    /// as it is. A UTC track and a ride without `t0_unix_s` is an error
+    /// naming both: nothing says where on the ride's clock the track falls.
+    pub fn on_ride_clock(mut self, t0_unix_s: Option<f64>, ride: &str) -> Result<Self, LoadError> {
+        if self.clock == Clock::Ride {
+            return Ok(self);
+        }
+        let Some(t0) = t0_unix_s else {
+            return Err(LoadError::File {
+                file: self.source.clone(),
+                message: format!(
+                    "its times are UTC, and {ride} has no t0_unix_s (the Unix time of its t_s = 0) to put them on the ride's clock: give the ride log a '# t0_unix_s:' line, or the reference as t_s,lat_deg,lon_deg CSV on the ride's clock"
+                ),
+            });
+        };
+        // A time of day falls on the day (before, of or after the ride's
+        // start) that puts the track's first point nearest the ride's start.
+        let day = match self.clock {
+            Clock::TimeOfDay => {
+                let midnight = (t0 / 86_400.0).floor() * 86_400.0;
+                [-86_400.0, 0.0, 86_400.0]
+                    .map(|d| midnight + d)
+                    .into_iter()
+                    .min_by(|a, b| {
+                        (a + self.t_s[0] - t0)
+                            .abs()
+                            .total_cmp(&(b + self.t_s[0] - t0).abs())
+                    })
+                    .unwrap_or(midnight)
+            }
+            _ => 0.0,
+        };
+        for t in &mut self.t_s {
+            *t += day - t0;
+        }
+        self.clock = Clock::Ride;
+        Ok(self)
+    }
 }
 
 /// Read a reference track (see the module documentation).
@@ -32,7 +93,242 @@ pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
         file: file.clone(),
         error,
     })?;
-    parse_reference(&bytes, &file)
+    let extension = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match extension.as_deref() {
+        Some("gpx") => parse_gpx(&bytes, &file),
+        Some("gga" | "nmea") => parse_nmea(&bytes, &file),
+        _ => parse_reference(&bytes, &file),
+    }
+}
+
+/// Parse a GPX reference track: the points of every track and segment in
+/// order, each with its time (a point without one is an error); a point at
+/// the same instant as the one before is dropped (devices repeat a point
+/// when they pause), an earlier one is an error.
+pub fn parse_gpx(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError> {
+    let whole = |message: String| LoadError::File {
+        file: file.to_string(),
+        message,
+    };
+    let doc = gpx::read(bytes).map_err(|e| whole(format!("not a GPX file: {e}")))?;
+    let mut track = ReferenceTrack {
+        source: file.to_string(),
+        t_s: Vec::new(),
+        points: Vec::new(),
+        has_alt: false,
+        clock: Clock::Unix,
+    };
+    let points = doc
+        .tracks
+        .iter()
+        .flat_map(|t| &t.segments)
+        .flat_map(|s| &s.points);
+    for (i, p) in points.enumerate() {
+        let Some(time) = p.time else {
+            return Err(whole(format!(
+                "track point {} has no <time>: a reference track needs times",
+                i + 1
+            )));
+        };
+        let t = time::OffsetDateTime::from(time).unix_timestamp_nanos() as f64 * 1e-9;
+        let (lon, lat) = (p.point().x(), p.point().y());
+        match track.t_s.last() {
+            Some(&last) if t == last => continue,
+            Some(&last) if t < last => {
+                return Err(whole(format!(
+                    "track point {} is at {t:.3} s, before the point before it ({last:.3} s)",
+                    i + 1
+                )));
+            }
+            _ => {}
+        }
+        track.has_alt |= p.elevation.is_some();
+        track.t_s.push(t);
+        track
+            .points
+            .push(Geodetic::new(lat, lon, p.elevation.unwrap_or(f64::NAN)));
+    }
+    if track.t_s.len() < 2 {
+        return Err(whole(
+            "a reference track needs at least two track points with times".into(),
+        ));
+    }
+    Ok(track)
+}
+
+/// Parse NMEA 0183 as a reference track: one point per GGA sentence with a
+/// fix (quality not 0), its UTC time of day dated by the RMC sentences (the
+/// last before it, or the first in the file; without one, by the ride's
+/// start: [`Clock::TimeOfDay`]); heights are GGA's altitude above mean sea
+/// level. Sentences whose checksum does not match are left out (real logs
+/// hold garbled ones); a GGA with a fix that cannot be read is an error
+/// naming its line and field.
+///
+/// Hand-written rather than with the `nmea` crate: two sentences' fields
+/// are needed, the crate pulls chrono and nom for them, and its GGA has no
+/// date either.
+pub fn parse_nmea(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError> {
+    let text = String::from_utf8_lossy(bytes);
+    let field_error = |line: usize, column: &str, message: String| LoadError::Field {
+        file: file.to_string(),
+        line: line as u64,
+        column: column.to_string(),
+        message,
+    };
+    // Every GGA and RMC sentence whose checksum matches: its line and fields.
+    // Real logs hold garbled sentences (a serial line drops bytes) and some
+    // exporters write wrong checksums; such sentences are left out, and
+    // counted for the error when nothing is left.
+    let mut sentences = Vec::new();
+    let mut garbled = 0usize;
+    for (i, raw) in text.lines().enumerate() {
+        let line = raw.trim();
+        let Some(body) = line.strip_prefix('$') else {
+            continue;
+        };
+        let body = match body.split_once('*') {
+            Some((body, sum)) => {
+                let sound = u8::from_str_radix(sum.trim(), 16)
+                    .is_ok_and(|want| body.bytes().fold(0u8, |a, b| a ^ b) == want);
+                if !sound {
+                    garbled += 1;
+                    continue;
+                }
+                body
+            }
+            None => body,
+        };
+        let fields: Vec<&str> = body.split(',').collect();
+        let kind = fields[0].get(2..).unwrap_or("");
+        if kind == "GGA" || kind == "RMC" {
+            sentences.push((i + 1, kind == "GGA", fields));
+        }
+    }
+    let date_of = |f: &[&str]| f.get(9).and_then(|d| days_from_ddmmyy(d));
+    // Dated by RMC where there is one; else times of day, dated by the ride.
+    let mut date = sentences
+        .iter()
+        .filter(|s| !s.1)
+        .find_map(|s| date_of(&s.2));
+    let clock = if date.is_some() {
+        Clock::Unix
+    } else {
+        Clock::TimeOfDay
+    };
+    let mut track = ReferenceTrack {
+        source: file.to_string(),
+        t_s: Vec::new(),
+        points: Vec::new(),
+        has_alt: false,
+        clock,
+    };
+    for (line, gga, f) in &sentences {
+        if !gga {
+            if let Some(d) = date_of(f) {
+                date = Some(d);
+            }
+            continue;
+        }
+        let get = |k: usize| f.get(k).copied().unwrap_or("");
+        if get(6).is_empty() || get(6) == "0" {
+            continue; // no fix
+        }
+        let tod = seconds_of_day(get(1))
+            .ok_or_else(|| field_error(*line, "time", format!("'{}' is no hhmmss time", get(1))))?;
+        let lat = degrees(get(2), get(3), 'N', 'S').ok_or_else(|| {
+            field_error(
+                *line,
+                "latitude",
+                format!("'{},{}' is no latitude", get(2), get(3)),
+            )
+        })?;
+        let lon = degrees(get(4), get(5), 'E', 'W').ok_or_else(|| {
+            field_error(
+                *line,
+                "longitude",
+                format!("'{},{}' is no longitude", get(4), get(5)),
+            )
+        })?;
+        let alt = get(9).parse::<f64>().ok().filter(|a| a.is_finite());
+        let mut t = date.unwrap_or(0) as f64 * 86_400.0 + tod;
+        if let Some(&last) = track.t_s.last() {
+            // Past midnight before the RMC of the new day.
+            if t < last - 43_200.0 {
+                t += 86_400.0;
+            }
+            if t == last {
+                continue;
+            }
+            if t < last {
+                return Err(field_error(
+                    *line,
+                    "time",
+                    format!("{} is before the fix before it", get(1)),
+                ));
+            }
+        }
+        track.has_alt |= alt.is_some();
+        track.t_s.push(t);
+        track
+            .points
+            .push(Geodetic::new(lat, lon, alt.unwrap_or(f64::NAN)));
+    }
+    if track.t_s.len() < 2 {
+        return Err(LoadError::File {
+            file: file.to_string(),
+            message: format!(
+                "a reference track needs at least two GGA fixes ({garbled} sentences with a wrong checksum left out)"
+            ),
+        });
+    }
+    Ok(track)
+}
+
+/// `hhmmss[.sss]` as seconds of the day.
+fn seconds_of_day(s: &str) -> Option<f64> {
+    let (h, m, sec) = (s.get(0..2)?, s.get(2..4)?, s.get(4..)?);
+    let (h, m, sec): (f64, f64, f64) = (h.parse().ok()?, m.parse().ok()?, sec.parse().ok()?);
+    (h < 24.0 && m < 60.0 && sec < 61.0).then_some(h * 3600.0 + m * 60.0 + sec)
+}
+
+/// NMEA's `(d)ddmm.mmmm` with its hemisphere as signed degrees.
+fn degrees(value: &str, hemisphere: &str, plus: char, minus: char) -> Option<f64> {
+    let dot = value.find('.').unwrap_or(value.len());
+    let split = dot.checked_sub(2)?;
+    let deg: f64 = value.get(..split)?.parse().ok()?;
+    let min: f64 = value.get(split..)?.parse().ok()?;
+    let v = deg + min / 60.0;
+    match hemisphere.chars().next()? {
+        c if c == plus => Some(v),
+        c if c == minus => Some(-v),
+        _ => None,
+    }
+}
+
+/// RMC's `ddmmyy` as days since 1970-01-01 (years 80-99 are 19xx), by
+/// Howard Hinnant's `days_from_civil`.
+fn days_from_ddmmyy(s: &str) -> Option<i64> {
+    if s.len() != 6 {
+        return None;
+    }
+    let (d, m, y): (i64, i64, i64) = (
+        s.get(0..2)?.parse().ok()?,
+        s.get(2..4)?.parse().ok()?,
+        s.get(4..6)?.parse().ok()?,
+    );
+    if !(1..=31).contains(&d) || !(1..=12).contains(&m) {
+        return None;
+    }
+    let y = if y >= 80 { 1900 + y } else { 2000 + y };
+    let y = if m <= 2 { y - 1 } else { y };
+    let era = y.div_euclid(400);
+    let yoe = y - era * 400;
+    let mp = (m + 9) % 12;
+    let doy = (153 * mp + 2) / 5 + d - 1;
+    let doe = yoe * 365 + yoe / 4 - yoe / 100 + doy;
+    Some(era * 146_097 + doe - 719_468)
 }
 
 /// Parse a reference track from CSV bytes; `file` names it in errors.
@@ -66,6 +362,7 @@ pub fn parse_reference(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadE
         t_s: Vec::new(),
         points: Vec::new(),
         has_alt: calt.is_some(),
+        clock: Clock::Ride,
     };
     for record in rdr.records() {
         let record = record.map_err(|e| whole(format!("unreadable CSV: {e}")))?;
@@ -133,6 +430,112 @@ pub fn parse_reference(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadE
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An NMEA sentence with its checksum.
+    fn sentence(body: &str) -> String {
+        format!("${body}*{:02X}\n", body.bytes().fold(0u8, |a, b| a ^ b))
+    }
+
+    #[test]
+    fn gga_fixes_are_dated_by_rmc_and_checked() {
+        let text = [
+            sentence("GPGGA,235959.00,3725.5838626,N,12205.6186063,W,1,15,1.0,6.83,M,-32.64,M,,"),
+            sentence("GPRMC,235959.00,A,3725.584,N,12205.619,W,0.0,62.8,060220,,,A"),
+            sentence("GPGGA,000000.50,3725.5838636,N,12205.6186036,W,4,15,1.0,6.90,M,-32.64,M,,"),
+            sentence("GPGGA,000001.50,3725.58,N,12205.61,W,0,15,1.0,6.90,M,-32.64,M,,"),
+            sentence("GNGSA,A,3,,,,,,,,,,,,,1.0,1.0,1.0"),
+        ]
+        .concat();
+        let r = parse_nmea(text.as_bytes(), "span.gga").unwrap();
+        assert_eq!(r.t_s.len(), 2, "the fix of quality 0 is left out");
+        // 2020-02-06 23:59:59 UTC, and half a second past midnight after it.
+        assert_eq!(r.t_s[0], 1_581_033_599.0);
+        assert_eq!(r.t_s[1], 1_581_033_600.5);
+        assert!((r.points[0].lat_deg - (37.0 + 25.5838626 / 60.0)).abs() < 1e-12);
+        assert!((r.points[0].lon_deg + (122.0 + 5.6186063 / 60.0)).abs() < 1e-12);
+        assert!(r.has_alt && r.clock == Clock::Unix);
+
+        // A sentence with a wrong checksum is left out: here the RMC, so
+        // the fixes are times of day, dated by the ride's start.
+        let garbled = text.replacen("060220,,,A*", "060221,,,A*", 1);
+        let r = parse_nmea(garbled.as_bytes(), "span.gga").unwrap();
+        assert_eq!(r.clock, Clock::TimeOfDay);
+        assert_eq!(r.t_s, vec![86_399.0, 86_400.5]);
+        // A ride that starts at 00:00:10 on 7 Feb puts the first fix 11 s before it.
+        let on = r.on_ride_clock(Some(1_581_033_610.0), "ride.csv").unwrap();
+        assert_eq!(on.t_s, vec![-11.0, -9.5]);
+        let unreadable =
+            sentence("GPGGA,12x000.00,3725.58,N,12205.61,W,1,15,1.0,6.8,M,,M,,").repeat(2);
+        let e = parse_nmea(unreadable.as_bytes(), "x.nmea")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("x.nmea:1") && e.contains("time"), "{e}");
+        let e = parse_nmea(b"$GPGGA,1*00\n", "x.nmea")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("1 sentences with a wrong checksum"), "{e}");
+    }
+
+    #[test]
+    fn a_utc_track_needs_the_rides_start_time() {
+        let gpx = br#"<?xml version="1.0"?><gpx version="1.1" creator="t" xmlns="http://www.topografix.com/GPX/1/1"><trk><trkseg>
+            <trkpt lat="52.5" lon="13.37"><ele>40</ele><time>2020-02-07T02:14:31Z</time></trkpt>
+            <trkpt lat="52.5" lon="13.37"><time>2020-02-07T02:14:31Z</time></trkpt>
+            <trkpt lat="52.50001" lon="13.37"><time>2020-02-07T02:14:32.5Z</time></trkpt>
+            </trkseg></trk></gpx>"#;
+        let r = parse_gpx(gpx, "t.gpx").unwrap();
+        assert_eq!(
+            r.t_s,
+            vec![1_581_041_671.0, 1_581_041_672.5],
+            "a repeated instant is dropped"
+        );
+        assert!(r.has_alt && r.points[1].alt_m.is_nan());
+        let on = r
+            .clone()
+            .on_ride_clock(Some(1_581_041_670.0), "ride.csv")
+            .unwrap();
+        assert_eq!(on.t_s, vec![1.0, 2.5]);
+        assert_eq!(on.clock, Clock::Ride);
+        let e = r.on_ride_clock(None, "ride.csv").unwrap_err().to_string();
+        assert!(
+            e.contains("t.gpx") && e.contains("ride.csv has no t0_unix_s"),
+            "{e}"
+        );
+        let e = parse_gpx(b"<gpx>", "t.gpx").unwrap_err().to_string();
+        assert!(e.contains("t.gpx") && e.contains("not a GPX file"), "{e}");
+    }
+
+    /// The shared real files: the NovAtel SPAN reference of the NMEA drive
+    /// (1 Hz GGA, 7 Feb 2020 02:13-02:43 UTC) and a Garmin GPX export.
+    #[test]
+    fn the_shared_span_and_garmin_tracks_read() {
+        let shared = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/formats");
+        let span =
+            read_reference(&shared.join("nmea/MTV.Local1.SPAN.20200206-181434.gga")).unwrap();
+        let span_s = span.t_s.last().unwrap() - span.t_s[0];
+        eprintln!(
+            "SPAN: {} points over {span_s} s from {}",
+            span.t_s.len(),
+            span.t_s[0]
+        );
+        assert!(span.t_s.len() > 1700 && (1700.0..1800.0).contains(&span_s));
+        // Its RMC sentences all carry wrong checksums: the GGA fixes are
+        // times of day (02:13:31 UTC first), dated by a ride's start.
+        assert_eq!(span.clock, Clock::TimeOfDay);
+        assert_eq!(span.t_s[0], 8011.0);
+        // The u-blox log of the same drive starts at 2020-02-07 02:14:17 UTC.
+        let on = span
+            .clone()
+            .on_ride_clock(Some(1_581_041_657.0), "ublox")
+            .unwrap();
+        assert_eq!(on.t_s[0], -46.0);
+        assert!((span.points[0].lat_deg - 37.4264).abs() < 1e-3);
+        let garmin = read_reference(&shared.join("gpx/garmin-activity.gpx")).unwrap();
+        let garmin_s = garmin.t_s.last().unwrap() - garmin.t_s[0];
+        eprintln!("Garmin: {} points over {garmin_s} s", garmin.t_s.len());
+        assert!(garmin.t_s.len() > 900 && (5400.0..5600.0).contains(&garmin_s));
+        assert!(garmin.has_alt);
+    }
 
     #[test]
     fn a_truth_csv_reads_with_heights_and_without() {
