@@ -299,7 +299,7 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_estimated_noise() {
 /// lies inside the path's 95 % ellipse, fitted with `settings`; each ride's
 /// ellipses must not shrink in its outages.
 fn pooled_coverage(settings: &FitSettings) -> f64 {
-    let (mut inside, mut total) = (0usize, 0usize);
+    let (mut inside, mut total, mut band_inside) = (0usize, 0usize, 0usize);
     for seed in 21..25 {
         let (sim, sig) = common::ride(seed, 600.0, &[]);
         let mut fit = Reconstruction::new(sig.clone(), settings.clone()).expect("fit");
@@ -308,11 +308,25 @@ fn pooled_coverage(settings: &FitSettings) -> f64 {
         let u = fit.model().uncertainty(fit.params()).expect("uncertainty");
         let truth = sim.truth_in(&sig.frame);
         let (mut ride_in, mut ride_n) = (0, 0);
+        let mut band_in = 0;
         let (mut out_sigma, mut out_n, mut in_sigma, mut in_n) = (0.0, 0, 0.0, 0);
         for j in (0..sig.len()).step_by(100) {
             let (de, dn) = (path[j].x - truth[j].x, path[j].y - truth[j].y);
             if u.mahalanobis2(j, de, dn) <= 5.991 {
                 ride_in += 1;
+            }
+            // The map's 95 % band across the track (diagnosis::view::cross_band).
+            if (1..sig.len() - 1).contains(&j) {
+                let at = |k: usize| [sig.t[k], path[k].x, path[k].y];
+                let [ve, vn, _, c] = u.path[j];
+                let band = gyropath::diagnosis::view::cross_band(
+                    &[at(j - 1), at(j), at(j + 1)],
+                    &[[ve, vn, c]; 3],
+                )[1];
+                let across = de * band.normal[0] + dn * band.normal[1];
+                if across.abs() <= band.half_width_m {
+                    band_in += 1;
+                }
             }
             ride_n += 1;
             let s = u.sigma_enu(j);
@@ -332,7 +346,7 @@ fn pooled_coverage(settings: &FitSettings) -> f64 {
             }
         }
         eprintln!(
-            "seed {seed}: {ride_in} of {ride_n} rows inside the 95 % ellipse; horizontal sigma {:.2} m with GPS, {:.2} m in outages",
+            "seed {seed}: {ride_in} of {ride_n} rows inside the 95 % ellipse, {band_in} inside the 95 % band across the track; horizontal sigma {:.2} m with GPS, {:.2} m in outages",
             in_sigma / in_n.max(1) as f64,
             out_sigma / out_n.max(1) as f64
         );
@@ -348,9 +362,17 @@ fn pooled_coverage(settings: &FitSettings) -> f64 {
         }
         inside += ride_in;
         total += ride_n;
+        band_inside += band_in;
     }
     let share = inside as f64 / total as f64;
-    eprintln!("pooled: {:.1} % inside the 95 % ellipse", 100.0 * share);
+    let band_share = band_inside as f64 / total as f64;
+    eprintln!(
+        "pooled: {:.1} % inside the 95 % ellipse, {:.1} % inside the 95 % band across the track",
+        100.0 * share,
+        100.0 * band_share
+    );
+    // The band the map draws holds the truth about as often as it says.
+    assert!((0.85..=0.99).contains(&band_share), "band {band_share}");
     share
 }
 
