@@ -142,6 +142,15 @@ fn a_fit_report_is_one_offline_page_with_its_plots_and_tables() {
         html.contains(&format!("RMS {to_ref:.2} m")),
         "reference RMS {to_ref}"
     );
+    // How often the truth lies inside the band: near 95 % when it is honest
+    // (96.6 % on the sample ride).
+    let at = html.find("the reference at ").expect("band coverage") + 17;
+    let share: f64 = html[at..]
+        .split(' ')
+        .next()
+        .and_then(|v| v.parse().ok())
+        .expect("a share");
+    assert!((85.0..=100.0).contains(&share), "{share} %");
     let gain = report["parameters"]["odometer_gain"][0]["value"]
         .as_f64()
         .unwrap();

@@ -307,6 +307,15 @@ pub fn page(c: &Contents) -> Page {
             if let Some(f) = &r.fixes {
                 items.push(item("GPS fixes", f.describe()));
             }
+            if let Some((inside, n)) = band_coverage(&view, uncertainty.as_ref(), c.reference) {
+                items.push(item(
+                    "inside the 95 % band",
+                    format!(
+                        "the reference at {:.1} % of the {n} drawn rows it covers (across the track)",
+                        100.0 * inside as f64 / n as f64
+                    ),
+                ));
+            }
             items
         }),
         figures,
@@ -354,6 +363,32 @@ pub fn page(c: &Contents) -> Page {
         settings_json: serde_json::to_string_pretty(&report.settings).unwrap_or_default(),
         model_json: serde_json::to_string_pretty(&SavedModel::of(fit)).unwrap_or_default(),
     }
+}
+
+/// How often the reference lies inside the path's 95 % band across the
+/// track, over the drawn rows it covers: `(inside, rows)`, `None` without
+/// a reference, an uncertainty or a covered row. Near 95 % when the
+/// band is honest.
+fn band_coverage(
+    view: &FitView,
+    u: Option<&Uncertainty>,
+    reference: Option<&MatchedReference>,
+) -> Option<(usize, usize)> {
+    let (u, (_, matched)) = (u?, reference?);
+    let cov: Vec<[f64; 3]> = u.path.iter().map(|v| [v[0], v[1], v[3]]).collect();
+    let band = crate::diagnosis::view::cross_band(&view.path, &cov);
+    let (mut inside, mut n) = (0, 0);
+    for (b, &row) in band.iter().zip(&view.rows) {
+        if let Ok(k) = matched.at_rows.binary_search_by_key(&row, |(r, _)| *r) {
+            let p = matched.at_rows[k].1;
+            let across = (p.x - b.east) * b.normal[0] + (p.y - b.north) * b.normal[1];
+            n += 1;
+            if across.abs() <= b.half_width_m {
+                inside += 1;
+            }
+        }
+    }
+    (n > 0).then_some((inside, n))
 }
 
 fn ride_items(c: &Contents, r: &FitReport) -> Vec<Item> {
