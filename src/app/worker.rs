@@ -616,11 +616,11 @@ impl Worker {
                         Some(&ride.origin),
                         ride.reference.as_deref(),
                         None,
+                        None,
                         format!(
                             "the gyropath app on {} (settings below)",
                             ride.source.name()
                         ),
-                        0.0,
                     )
                 };
                 match crate::report::write(path, protect, &contents) {

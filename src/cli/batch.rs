@@ -142,7 +142,7 @@ fn fit_one(
             &origin,
             against.as_ref(),
             uncertainty.as_ref(),
-            report.elapsed_s,
+            &report,
         )?;
     }
     Ok(report)

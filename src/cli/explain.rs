@@ -75,7 +75,6 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
     if let Some(html) = &args.html {
         check_html_name(html)?;
     }
-    let started = Instant::now();
     let data_is_stdout = data_on_stdout(&[
         ("--out", &args.out),
         ("--json", &args.json),
@@ -149,8 +148,8 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
                 Some(&origin),
                 against.as_ref(),
                 uncertainty.as_ref(),
+                None,
                 command_line(),
-                started.elapsed().as_secs_f64(),
             )
         };
         write_html(html, &args.ride, &contents)?;

@@ -167,7 +167,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
             &origin,
             against.as_ref(),
             uncertainty.as_ref(),
-            report.elapsed_s,
+            &report,
         )?;
     }
     if !args.quiet {

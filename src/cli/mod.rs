@@ -336,15 +336,15 @@ fn write_fit_html(
     origin: &pipeline::Origin,
     against: Option<&pipeline::MatchedReference>,
     uncertainty: Option<&gyropath::model::Uncertainty>,
-    elapsed_s: f64,
+    report: &FitReport,
 ) -> Result<()> {
     let contents = gyropath::report::Contents::of_fit(
         fit,
         Some(origin),
         against,
         uncertainty,
+        Some(report),
         command_line(),
-        elapsed_s,
     );
     write_html(out, ride, &contents)
 }

@@ -217,6 +217,26 @@ pub fn build(
     })
 }
 
+/// A model's effect list ("initial_position, ..., gps_lag") with the
+/// paper's five said once: "paper + gps_lag" (a barometer's offset, which
+/// comes with the data, is left out); other lists as they are.
+pub fn short_model(model: &str) -> String {
+    let ids: Vec<&str> = model.split(", ").collect();
+    if PAPER.iter().all(|p| ids.contains(p)) {
+        let extra: Vec<&str> = ids
+            .into_iter()
+            .filter(|i| !PAPER.contains(i) && *i != "baro_offset")
+            .collect();
+        if extra.is_empty() {
+            "paper".to_string()
+        } else {
+            format!("paper + {}", extra.join(" + "))
+        }
+    } else {
+        model.to_string()
+    }
+}
+
 #[cfg(test)]
 pub(crate) mod testing {
     //! Finite-difference checks shared by the effect tests.
@@ -346,25 +366,5 @@ mod tests {
             expand(&list("paper,-warp_drive"), &sig),
             Err(ModelError::UnknownEffect { id: e, .. }) if e == "warp_drive"
         ));
-    }
-}
-
-/// A model's effect list ("initial_position, ..., gps_lag") with the
-/// paper's five said once: "paper + gps_lag" (a barometer's offset, which
-/// comes with the data, is left out); other lists as they are.
-pub fn short_model(model: &str) -> String {
-    let ids: Vec<&str> = model.split(", ").collect();
-    if PAPER.iter().all(|p| ids.contains(p)) {
-        let extra: Vec<&str> = ids
-            .into_iter()
-            .filter(|i| !PAPER.contains(i) && *i != "baro_offset")
-            .collect();
-        if extra.is_empty() {
-            "paper".to_string()
-        } else {
-            format!("paper + {}", extra.join(" + "))
-        }
-    } else {
-        model.to_string()
     }
 }

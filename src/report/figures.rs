@@ -7,7 +7,7 @@
 
 use crate::diagnosis::FitView;
 use crate::diagnosis::ReferenceComparison;
-use crate::diagnosis::view::{BandPoint, OUTAGE_S, cross_band, outages};
+use crate::diagnosis::view::{BandPoint, OUTAGE_S, outages};
 use crate::model::Uncertainty;
 use crate::pipeline::MatchedReference;
 
@@ -25,14 +25,17 @@ pub struct Input<'a> {
     pub view: &'a FitView,
     /// At the view's rows.
     pub uncertainty: Option<&'a Uncertainty>,
+    /// The 95 % band across the path at the view's rows (empty without an
+    /// uncertainty; see [`crate::diagnosis::view::cross_band`]).
+    pub band: &'a [BandPoint],
     pub reference: Option<&'a MatchedReference>,
     pub comparison: Option<&'a ReferenceComparison>,
 }
 
 /// Every figure of the page that the fit has data for, in page order.
 pub fn all(input: &Input) -> Vec<Figure> {
-    let band = band(input);
-    let mut figures = vec![map(input, &band)];
+    let band = input.band;
+    let mut figures = vec![map(input, band)];
     figures.push(residuals(input));
     if let Some(f) = vertical(input) {
         figures.push(f);
@@ -40,19 +43,11 @@ pub fn all(input: &Input) -> Vec<Figure> {
     if let Some(f) = reference_error(input) {
         figures.push(f);
     }
-    if let Some(f) = uncertainty(input, &band) {
+    if let Some(f) = uncertainty(input, band) {
         figures.push(f);
     }
     figures.push(bias(input));
     figures
-}
-
-/// The 95 % band across the path at each drawn row (see [`cross_band`]).
-fn band(input: &Input) -> Vec<BandPoint> {
-    input.uncertainty.map_or(Vec::new(), |u| {
-        let cov: Vec<[f64; 3]> = u.path.iter().map(|v| [v[0], v[1], v[3]]).collect();
-        cross_band(&input.view.path, &cov)
-    })
 }
 
 /// The map's size (px) for data `dx` by `dy` metres: as large as the page

@@ -20,6 +20,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::diagnosis::view::BandPoint;
 use crate::diagnosis::{Diagnosis, FitView, describe_estimates};
 use crate::explain::{Ending, Explanation, SavedModel};
 use crate::export::{ExportError, FitReport, write_atomically};
@@ -115,7 +116,11 @@ pub struct Contents<'a> {
     pub diagnosis: Option<&'a Diagnosis>,
     /// How to make it again ("gyropath fit ride.csv --html r.html").
     pub command: String,
-    pub elapsed_s: f64,
+    /// The fit's report when the caller has made it already (the command
+    /// line has, for its summary and JSON), with the reference compared; else
+    /// the page makes it. Its sigmas are the same either way: a report
+    /// costs the segment lengths' likelihoods, some 7 % of a fit.
+    pub report: Option<&'a FitReport>,
 }
 
 impl<'a> Contents<'a> {
@@ -125,8 +130,8 @@ impl<'a> Contents<'a> {
         origin: Option<&'a Origin>,
         reference: Option<&'a MatchedReference>,
         uncertainty: Option<&'a Uncertainty>,
+        report: Option<&'a FitReport>,
         command: String,
-        elapsed_s: f64,
     ) -> Self {
         Self {
             fit,
@@ -137,7 +142,7 @@ impl<'a> Contents<'a> {
             explanation: None,
             diagnosis: None,
             command,
-            elapsed_s,
+            report,
         }
     }
 }
@@ -256,7 +261,20 @@ pub fn page(c: &Contents) -> Page {
         }),
         _ => model.uncertainty_at(theta, Some(&view.rows)),
     };
-    let report = pipeline::report_with(fit, c.elapsed_s, uncertainty.as_ref(), c.reference);
+    let made;
+    let report = match c.report {
+        Some(r) => r,
+        None => {
+            made = pipeline::report_with(fit, 0.0, uncertainty.as_ref(), c.reference);
+            &made
+        }
+    };
+    // The band across the path, once, for the map, its half-width plot and
+    // how often the reference lies inside it.
+    let band = uncertainty.as_ref().map_or(Vec::new(), |u| {
+        let cov: Vec<[f64; 3]> = u.path.iter().map(|v| [v[0], v[1], v[3]]).collect();
+        crate::diagnosis::view::cross_band(&view.path, &cov)
+    });
     let history = if c.history.is_empty() {
         vec![ModelRow::of_fit(
             fit,
@@ -269,6 +287,7 @@ pub fn page(c: &Contents) -> Page {
         model,
         view: &view,
         uncertainty: uncertainty.as_ref(),
+        band: &band,
         reference: c.reference,
         comparison: report.reference.as_ref(),
     });
@@ -277,7 +296,7 @@ pub fn page(c: &Contents) -> Page {
         version: env!("CARGO_PKG_VERSION").into(),
         made: utc_now(),
         failure: pipeline::failure(fit),
-        ride: ride_items(c, &report),
+        ride: ride_items(c, report),
         verdicts: c.origin.map_or(Vec::new(), |o| {
             o.verdicts
                 .iter()
@@ -289,8 +308,8 @@ pub fn page(c: &Contents) -> Page {
                 .collect()
         }),
         warnings: report.warnings.clone(),
-        result: result_items(&report),
-        params: param_rows(&report),
+        result: result_items(report),
+        params: param_rows(report),
         reference: report.reference.as_ref().map_or(Vec::new(), |r| {
             let mut items = vec![
                 item("reference", &r.reference),
@@ -307,7 +326,7 @@ pub fn page(c: &Contents) -> Page {
             if let Some(f) = &r.fixes {
                 items.push(item("GPS fixes", f.describe()));
             }
-            if let Some((inside, n)) = band_coverage(&view, uncertainty.as_ref(), c.reference) {
+            if let Some((inside, n)) = band_coverage(&view, &band, c.reference) {
                 items.push(item(
                     "inside the 95 % band",
                     format!(
@@ -367,16 +386,14 @@ pub fn page(c: &Contents) -> Page {
 
 /// How often the reference lies inside the path's 95 % band across the
 /// track, over the drawn rows it covers: `(inside, rows)`, `None` without
-/// a reference, an uncertainty or a covered row. Near 95 % when the
+/// a reference, a band or a covered row. Near 95 % when the
 /// band is honest.
 fn band_coverage(
     view: &FitView,
-    u: Option<&Uncertainty>,
+    band: &[BandPoint],
     reference: Option<&MatchedReference>,
 ) -> Option<(usize, usize)> {
-    let (u, (_, matched)) = (u?, reference?);
-    let cov: Vec<[f64; 3]> = u.path.iter().map(|v| [v[0], v[1], v[3]]).collect();
-    let band = crate::diagnosis::view::cross_band(&view.path, &cov);
+    let (_, matched) = reference?;
     let (mut inside, mut n) = (0, 0);
     for (b, &row) in band.iter().zip(&view.rows) {
         if let Ok(k) = matched.at_rows.binary_search_by_key(&row, |(r, _)| *r) {
