@@ -415,6 +415,8 @@ pub struct FitReport {
     pub stats: FitStats,
     /// The attitude model (3D or planar) and why it was chosen.
     pub attitude: String,
+    /// Where the distance came from (wheel sensor, odometer, GNSS speed).
+    pub distance_source: String,
     /// The noise settings the fit ran with (`settings.model` holds what was
     /// asked for): estimated from the ride, with their 1-sigma ranges, or set.
     pub noise: Option<crate::optimisation::NoiseEstimate>,
@@ -566,6 +568,7 @@ impl FitReport {
             iterations_step2: s2,
             stats: fit.stats(),
             attitude: sig.attitude.describe(),
+            distance_source: sig.odometer.describe(),
             noise: fit.noise().cloned(),
             segment_preference: crate::optimisation::noise::segment_preference(model, fit.params()),
             gps_sigma_m: model.spec.sigma_horizontal_m,

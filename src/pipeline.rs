@@ -31,7 +31,11 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
 /// error when it cannot belong to the ride (no time in common, far from
 /// every fix).
 pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference, PipelineError> {
-    let track = import::read_reference(path)?.on_ride_clock(signals.t0_unix_s, &signals.source)?;
+    let track = import::read_reference(path)?.on_ride_clock(
+        signals.t0_unix_s,
+        signals.t0_boot_s,
+        &signals.source,
+    )?;
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))
 }

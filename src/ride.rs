@@ -25,6 +25,13 @@ pub struct RideLog {
     /// (lat, lon) in degrees, `None` where the row has no fix.
     pub fix: Vec<Option<(f64, f64)>>,
     pub gps_alt_m: Option<Vec<Option<f64>>>,
+    /// The GNSS receiver's ground speed (m/s, from its Doppler
+    /// measurements; never negative), on the rows where it reported one: the
+    /// distance when the log has no wheel sensor.
+    pub gps_speed_mps: Option<Vec<Option<f64>>>,
+    /// The GNSS receiver's course over ground (degrees clockwise from north),
+    /// on the rows where it reported one.
+    pub gps_course_deg: Option<Vec<Option<f64>>>,
     /// 1-sigma horizontal accuracy of the fix on this row (m).
     pub gps_hacc_m: Option<Vec<Option<f64>>>,
     /// 1-sigma vertical accuracy of the fix on this row (m).
@@ -50,6 +57,8 @@ impl RideLog {
             &mut self.odo_m,
             &mut self.speed_mps,
             &mut self.gps_alt_m,
+            &mut self.gps_speed_mps,
+            &mut self.gps_course_deg,
             &mut self.gps_hacc_m,
             &mut self.gps_vacc_m,
             &mut self.baro_alt_m,

@@ -71,6 +71,9 @@ pub struct Signals {
     /// message, a log's `# t0_unix_s:` line): the path's outputs carry it so
     /// that they line up with the user's other tools.
     pub t0_unix_s: Option<f64>,
+    /// The device's boot-clock time (s) of `t = 0`, when the log gives it
+    /// (comma2k19: every signal and its reference pose run on that clock).
+    pub t0_boot_s: Option<f64>,
 }
 
 /// How the attitude is modelled: the choice and the reason for it.
@@ -189,6 +192,49 @@ pub enum Odometer {
     Cumulative,
     /// Integrated from a logged forward speed.
     Speed,
+    /// Integrated from the GNSS receiver's ground speed: the log has no
+    /// wheel sensor (see [`distance_from_gnss_speed`]).
+    GnssSpeed {
+        /// Speed samples integrated.
+        samples: usize,
+        /// Time counted as standing (s): no distance.
+        standing_s: f64,
+        /// Stretches with no speed sample for longer than [`GNSS_SPEED_GAP_S`]
+        /// (start, end in s): their distance is interpolated, not measured.
+        gaps: Vec<(f64, f64)>,
+    },
+}
+
+impl Odometer {
+    /// Where the distance came from, in words, for summaries and reports.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::WheelPulses {
+                circumference_m,
+                revolutions,
+            } => format!("wheel pulses ({revolutions} revolutions of {circumference_m:.3} m)"),
+            Self::Cumulative => "a cumulative distance".into(),
+            Self::Speed => "a logged forward speed, integrated".into(),
+            Self::GnssSpeed {
+                samples,
+                standing_s,
+                gaps,
+            } => {
+                let mut s = format!(
+                    "the GNSS speed, integrated (no wheel sensor; {samples} samples, {standing_s:.0} s standing"
+                );
+                if !gaps.is_empty() {
+                    let total: f64 = gaps.iter().map(|(a, b)| b - a).sum();
+                    s.push_str(&format!(
+                        ", {} gaps of {total:.0} s interpolated",
+                        gaps.len()
+                    ));
+                }
+                s.push(')');
+                s
+            }
+        }
+    }
 }
 
 const NO_FIX: u32 = u32::MAX;
@@ -276,17 +322,19 @@ impl Signals {
         }
 
         let (distance, odometer) = odometer_distance(log)?;
-        let t0_unix_s =
-            match log.metadata.get("t0_unix_s").map(|v| v.trim()) {
-                None => None,
-                Some(v) => Some(v.parse::<f64>().ok().filter(|x| x.is_finite()).ok_or_else(
-                    || {
-                        unusable(format!(
-                            "metadata t0_unix_s: '{v}' is not a time in seconds since 1970"
-                        ))
-                    },
-                )?),
-            };
+        let time = |key: &str, what: &str| -> Result<Option<f64>, SignalError> {
+            match log.metadata.get(key).map(|v| v.trim()) {
+                None => Ok(None),
+                Some(v) => v
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|x| x.is_finite())
+                    .map(Some)
+                    .ok_or_else(|| unusable(format!("metadata {key}: '{v}' is not {what}"))),
+            }
+        };
+        let t0_unix_s = time("t0_unix_s", "a time in seconds since 1970")?;
+        let t0_boot_s = time("t0_boot_s", "a time in seconds on the device's boot clock")?;
 
         let first = log.fix.iter().position(Option::is_some).ok_or_else(|| {
             unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into())
@@ -357,6 +405,7 @@ impl Signals {
             attitude,
             warnings,
             t0_unix_s,
+            t0_boot_s,
         })
     }
 
@@ -376,6 +425,11 @@ pub fn odometer_distance(log: &RideLog) -> Result<(Vec<f64>, Odometer), SignalEr
         Ok((distance_from_odometer(odo, log)?, Odometer::Cumulative))
     } else if let Some(speed) = &log.speed_mps {
         Ok((distance_from_speed(speed, log)?, Odometer::Speed))
+    } else if let Some(speed) = &log.gps_speed_mps
+        && log.wheel_pulse.is_none()
+    {
+        let (d, kind) = distance_from_gnss_speed(speed, log)?;
+        Ok((d, kind))
     } else if let Some(pulses) = &log.wheel_pulse {
         let c: f64 = log
             .wheel_circumference_m()
@@ -410,6 +464,78 @@ fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>,
         d[j] = 0.5 * (v[j - 1] + v[j]) * (log.t_s[j] - log.t_s[j - 1]);
     }
     Ok(d)
+}
+
+/// A GNSS speed slower than this (m/s), on a step whose gyro turns slower
+/// than [`STANDING_RATE_DPS`], is a vehicle standing: a receiver at rest
+/// reports a few centimetres to decimetres per second of Doppler noise
+/// (u-blox: 0.05-0.2 m/s), which integrated over a stop of minutes would
+/// move the path by tens of metres. The gyro must agree, so that a vehicle
+/// turning slowly (a robot in place, a car manoeuvring) keeps its distance.
+pub const STANDING_SPEED_MPS: f64 = 0.3;
+/// See [`STANDING_SPEED_MPS`] (deg/s, the norm of the rate as logged, bias
+/// included: uncalibrated MEMS gyros are 0.1-2 deg/s off at rest).
+pub const STANDING_RATE_DPS: f64 = 3.0;
+/// Consecutive GNSS speed samples further apart than this (s) leave a gap
+/// (a receiver reports at 1-18 Hz; a missed sample or two is not a gap).
+pub const GNSS_SPEED_GAP_S: f64 = 2.5;
+
+/// Per-step distance from the GNSS receiver's ground speed, for a log with
+/// no wheel sensor. The speed (a Doppler measurement, far better than
+/// differenced positions) is interpolated linearly between its samples to
+/// every row and integrated by trapezoids, `d_j = (v_{j-1} + v_j) / 2 dt_j`,
+/// except on steps where the vehicle stands (both ends slower than
+/// [`STANDING_SPEED_MPS`] and the gyro below [`STANDING_RATE_DPS`]), which
+/// get none. Before the first and after the last sample the speed is held.
+/// Gaps longer than [`GNSS_SPEED_GAP_S`] are bridged the same way and
+/// listed: there the distance is a guess the fit's gain cannot correct.
+pub fn distance_from_gnss_speed(
+    speed: &[Option<f64>],
+    log: &RideLog,
+) -> Result<(Vec<f64>, Odometer), SignalError> {
+    let samples: Vec<usize> = (0..speed.len()).filter(|&i| speed[i].is_some()).collect();
+    if samples.len() < 2 {
+        return Err(SignalError::Field {
+            file: log.source.clone(),
+            line: log.line.first().copied().unwrap_or(0),
+            column: "gps_speed_mps".into(),
+            message: format!(
+                "the log has no wheel sensor and {} GNSS speed sample(s): at least two are needed to integrate a distance",
+                samples.len()
+            ),
+        });
+    }
+    let v = fill_gaps(speed);
+    let t = &log.t_s;
+    let mut gaps = Vec::new();
+    for w in samples.windows(2) {
+        let (a, b) = (t[w[0]], t[w[1]]);
+        if b - a > GNSS_SPEED_GAP_S {
+            gaps.push((a, b));
+        }
+    }
+    let still = |j: usize| {
+        let g = log.gyro_dps[j];
+        (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt() < STANDING_RATE_DPS
+    };
+    let mut d = vec![0.0; v.len()];
+    let mut standing_s = 0.0;
+    for j in 1..v.len() {
+        let dt = t[j] - t[j - 1];
+        if v[j - 1] < STANDING_SPEED_MPS && v[j] < STANDING_SPEED_MPS && still(j) {
+            standing_s += dt;
+        } else {
+            d[j] = 0.5 * (v[j - 1] + v[j]) * dt;
+        }
+    }
+    Ok((
+        d,
+        Odometer::GnssSpeed {
+            samples: samples.len(),
+            standing_s,
+            gaps,
+        },
+    ))
 }
 
 /// Per-step distance from a cumulative odometer; empty fields are interpolated.
@@ -787,5 +913,73 @@ mod attitude_tests {
         let (d, kind) = odometer_distance(&log).unwrap();
         assert_eq!(kind, Odometer::Speed);
         assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
+    }
+
+    /// A log with only the receiver's speed: sparse samples are interpolated
+    /// and integrated, a stop (slow and not turning) adds nothing, a slow
+    /// turn does, and a gap is listed.
+    #[test]
+    fn the_gnss_speed_gives_the_distance_without_a_wheel_sensor() {
+        let mut log = crate::testing::winding_log(30.0, 10.0);
+        let n = log.len();
+        let dt = log.t_s[1] - log.t_s[0];
+        // 1 Hz samples: 5 m/s, a stop from 10 to 15 s (0.1 m/s of Doppler
+        // noise), none from 20 to 25 s.
+        let every = (1.0 / dt).round() as usize;
+        let speed: Vec<Option<f64>> = (0..n)
+            .map(|j| {
+                let tj = log.t_s[j];
+                (j % every == 0 && !(20.5..25.0).contains(&tj)).then_some(
+                    if (10.0..=15.0).contains(&tj) {
+                        0.1
+                    } else {
+                        5.0
+                    },
+                )
+            })
+            .collect();
+        log.odo_m = None;
+        log.speed_mps = None;
+        log.gps_speed_mps = Some(speed.clone());
+        for g in &mut log.gyro_dps {
+            *g = [0.05, -0.1, 0.2];
+        }
+        let (d, kind) = odometer_distance(&log).unwrap();
+        let Odometer::GnssSpeed {
+            samples,
+            standing_s,
+            gaps,
+        } = &kind
+        else {
+            panic!("{kind:?}");
+        };
+        assert_eq!(*samples, speed.iter().flatten().count());
+        assert!((standing_s - 5.0).abs() < 1e-6, "{standing_s}");
+        assert_eq!(gaps, &vec![(20.0, 25.0)]);
+        let total: f64 = d.iter().sum();
+        // 30 s at 5 m/s less the stop (5 s) and the ramps into and out of it (2 x 1 s at half speed).
+        let expected = 5.0 * (log.t_s[n - 1] - 5.0 - 1.0);
+        assert!(
+            (total - expected).abs() < 0.5,
+            "{total} m, expected {expected}"
+        );
+        assert!(
+            kind.describe().contains("1 gaps of 5 s interpolated"),
+            "{}",
+            kind.describe()
+        );
+        // Turning while slow is not standing.
+        for g in &mut log.gyro_dps {
+            *g = [0.0, 0.0, 20.0];
+        }
+        let (turning, _) = odometer_distance(&log).unwrap();
+        assert!(turning.iter().sum::<f64>() > total + 0.4);
+        // One sample cannot be integrated.
+        log.gps_speed_mps = Some((0..n).map(|j| (j == 3).then_some(2.0)).collect());
+        let e = odometer_distance(&log).unwrap_err().to_string();
+        assert!(
+            e.contains("gps_speed_mps") && e.contains("1 GNSS speed sample"),
+            "{e}"
+        );
     }
 }

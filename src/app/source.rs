@@ -22,6 +22,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
     ));
     let RideSource::Path(path, options) = &ride.source else {
         ui.label(format!("attitude: {}", ride.attitude.describe()));
+        ui.label(format!("distance: {}", ride.distance));
         checks_ui(ui, ride);
         return;
     };
@@ -117,6 +118,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
     .response
     .on_hover_text(ride.attitude.describe());
     ui.small(ride.attitude.describe());
+    ui.label(format!("distance: {}", ride.distance));
     checks_ui(ui, ride);
 }
 

@@ -119,6 +119,8 @@ pub struct RideView {
     pub origin: Origin,
     /// The attitude model and why.
     pub attitude: crate::signals::Attitude,
+    /// Where the distance came from (wheel sensor, odometer, GNSS speed), in words.
+    pub distance: String,
     /// The local frame the fixes are in (for the map's tiles).
     pub frame: crate::geodesy::LocalFrame,
 }
@@ -654,6 +656,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         warnings: sig.warnings.clone(),
         origin,
         attitude: sig.attitude.clone(),
+        distance: sig.odometer.describe(),
         frame: sig.frame.clone(),
     }
 }

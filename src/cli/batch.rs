@@ -12,11 +12,11 @@ struct BatchRow {
 }
 
 /// Every `.csv`, `.bag` and `.mcap` in the given files and folders (folders not
-/// recursed; a rosbag2 folder is one ride), sorted.
+/// recursed; a rosbag2 folder or a comma2k19 segment is one ride), sorted.
 fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut rides = Vec::new();
     for input in inputs {
-        if input.is_dir() && !input.join("metadata.yaml").is_file() {
+        if input.is_dir() && !gyropath::import::is_ride_folder(input) {
             let mut found: Vec<PathBuf> = std::fs::read_dir(input)
                 .with_context(|| format!("cannot list {}", input.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))

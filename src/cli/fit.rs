@@ -99,7 +99,8 @@ impl FitArgs {
 }
 
 pub fn fit(args: &FitArgs) -> Result<()> {
-    let folder_of_rides = args.rides[0].is_dir() && !args.rides[0].join("metadata.yaml").is_file();
+    let folder_of_rides =
+        args.rides[0].is_dir() && !gyropath::import::is_ride_folder(&args.rides[0]);
     let batch = args.rides.len() > 1 || args.out_dir.is_some() || folder_of_rides;
     if batch {
         return fit_batch(args);
@@ -197,6 +198,7 @@ pub(super) fn summary_text(r: &FitReport, verbose: bool) -> String {
     );
     _ = writeln!(out, "model     {}", r.model.join(", "));
     _ = writeln!(out, "attitude  {}", r.attitude);
+    _ = writeln!(out, "distance  from {}", r.distance_source);
     match &r.noise {
         Some(n) => _ = writeln!(out, "noise     from the ride: {}", n.describe()),
         None => {

@@ -130,6 +130,10 @@ pub struct SourceArgs {
     /// level, else 3D), `3d`, or `planar` (heading only).
     #[arg(long, default_value = "auto")]
     pub attitude: String,
+    /// Distance: `auto` (the wheel sensor or odometer, else the GNSS speed) or
+    /// `gnss` (the GNSS speed, leaving the log's odometer out).
+    #[arg(long, default_value = "auto")]
+    pub distance: String,
 }
 
 impl SourceArgs {
@@ -153,6 +157,10 @@ impl SourceArgs {
             map: self.map.clone(),
             gps: self.gps_csv.clone(),
             attitude: (self.attitude != "auto").then(|| self.attitude.clone()),
+            distance: self
+                .distance
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--distance: {e}"))?,
         })
     }
 }

@@ -1,6 +1,7 @@
 //! Every input format into one [`RideLog`]: the ride-log CSV (format:
 //! `data/ride-log-format.md`), ROS 1 bags, ROS 2 bags (MCAP, alone or in a
-//! rosbag2 folder) and CSV exports described by a small TOML map. Then the
+//! rosbag2 folder), comma2k19 segments (folders of NumPy arrays) and CSV
+//! exports described by a small TOML map. Then the
 //! axes, units and datum are checked against the data ([`checks`]) and a
 //! sensor mounting is applied ([`mount`]).
 //!
@@ -11,8 +12,10 @@
 //! column or the topic; a bad input never panics and never loads half.
 
 pub mod checks;
+pub mod comma2k19;
 pub mod mapped_csv;
 pub mod mount;
+pub mod npy;
 pub mod reference;
 pub mod ride_csv;
 pub mod ros1;
@@ -74,6 +77,8 @@ pub enum SourceKind {
     Ros2Mcap,
     /// Any CSV export, read through a TOML column map.
     MappedCsv,
+    /// A comma2k19 segment: a folder of NumPy arrays.
+    Comma2k19,
 }
 
 impl SourceKind {
@@ -83,6 +88,7 @@ impl SourceKind {
             Self::Ros1Bag => "ROS 1 bag",
             Self::Ros2Mcap => "ROS 2 bag (MCAP)",
             Self::MappedCsv => "mapped CSV",
+            Self::Comma2k19 => "comma2k19 segment",
         }
     }
 
@@ -90,7 +96,7 @@ impl SourceKind {
     pub fn default_mount(self) -> MountChoice {
         match self {
             Self::Ros1Bag | Self::Ros2Mcap => MountChoice::Auto,
-            Self::RideCsv | Self::MappedCsv => MountChoice::AsLogged,
+            Self::RideCsv | Self::MappedCsv | Self::Comma2k19 => MountChoice::AsLogged,
         }
     }
 }
@@ -134,6 +140,36 @@ pub struct ImportOptions {
     /// The attitude model, `3d` or `planar`, written to the log's `attitude`
     /// metadata (`None`: as the log says, else chosen from the data).
     pub attitude: Option<String>,
+    /// Where the distance comes from.
+    pub distance: DistanceChoice,
+}
+
+/// Where a ride's distance comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum DistanceChoice {
+    /// The wheel sensor or odometer when the log has one, else the GNSS speed.
+    #[default]
+    Auto,
+    /// The GNSS speed, whatever else the log has: to fit a log as if it had
+    /// no wheel sensor (or one known to be faulty), and to compare the two.
+    Gnss,
+}
+
+impl std::str::FromStr for DistanceChoice {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            "gnss" => Ok(Self::Gnss),
+            other => Err(format!("'{other}' is neither 'auto' nor 'gnss'")),
+        }
+    }
+}
+
+/// Whether `path` is a folder that holds one ride (a rosbag2 folder, a
+/// comma2k19 segment), not a folder of rides.
+pub fn is_ride_folder(path: &Path) -> bool {
+    path.is_dir() && (path.join("metadata.yaml").is_file() || comma2k19::is_segment(path))
 }
 
 /// What was read, from where, and what the checks say of it.
@@ -172,6 +208,9 @@ impl Imported {
 pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadError> {
     if options.map.is_some() {
         return Ok(SourceKind::MappedCsv);
+    }
+    if comma2k19::is_segment(path) {
+        return Ok(SourceKind::Comma2k19);
     }
     if path.is_dir() {
         return Ok(SourceKind::Ros2Mcap);
@@ -218,7 +257,14 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
             })?;
             (mapped_csv::load(path, options.gps.as_deref(), map)?, None)
         }
+        SourceKind::Comma2k19 => (
+            comma2k19::read(path, options.distance == DistanceChoice::Auto)?,
+            None,
+        ),
     };
+    if options.distance == DistanceChoice::Gnss {
+        without_odometer(&mut log)?;
+    }
     if topics.is_some() && !log.metadata.contains_key("source") {
         log.metadata.insert(
             "source".into(),
@@ -242,6 +288,29 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         }
     }
     Ok(checked(log, kind, topics, &options.mount))
+}
+
+/// Leave out a log's wheel sensor and odometer, so that its distance comes
+/// from the GNSS speed; an error when it has none.
+fn without_odometer(log: &mut RideLog) -> Result<(), LoadError> {
+    let samples = log
+        .gps_speed_mps
+        .as_ref()
+        .map_or(0, |s| s.iter().flatten().count());
+    if samples < 2 {
+        return Err(LoadError::File {
+            file: log.source.clone(),
+            message: "--distance gnss: the log has no GNSS speed (a 'gps_speed_mps' column) to take the distance from".into(),
+        });
+    }
+    log.wheel_pulse = None;
+    log.odo_m = None;
+    log.speed_mps = None;
+    log.warnings.push(format!(
+        "{}: the distance is the GNSS speed's (--distance gnss); the log's wheel sensor or odometer is not used",
+        log.source
+    ));
+    Ok(())
 }
 
 /// Check a log read by any reader and mount it as `mount` says.

@@ -6,7 +6,9 @@
 //! from a GPX track (`.gpx`: every track point with its `<time>`, `<ele>`
 //! when given) or from NMEA 0183 (`.gga`, `.nmea`: the GGA sentences of a
 //! fix, dated by the RMC sentences), the last two in UTC: they are put on the
-//! ride's clock by its `t0_unix_s` ([`ReferenceTrack::on_ride_clock`]).
+//! ride's clock by its `t0_unix_s` ([`ReferenceTrack::on_ride_clock`]), or
+//! from a comma2k19 segment's `global_pose` (its folder or the segment's),
+//! on the device's boot clock ([`super::comma2k19::read_reference`]).
 //! CSV columns are found by name; `#` lines are comments. Time must increase
 //! strictly and every value must be a finite number: anything else is an
 //! error naming the file, the line and the column.
@@ -42,16 +44,41 @@ pub enum Clock {
     /// unknown (NMEA with GGA only, as GNSS/INS exports often are): dated
     /// by the ride's start.
     TimeOfDay,
+    /// A device's boot clock (comma2k19's `global_pose`): put on the ride's
+    /// clock by its `t0_boot_s`.
+    Boot,
 }
 
 impl ReferenceTrack {
     /// The track on the clock of a ride whose `t_s = 0` is `t0_unix_s`
-    /// (`t_ride = t_unix - t0_unix_s`); a track already on the ride's clock
-    /// as it is. A UTC track and a ride without `t0_unix_s` is an error
-    /// naming both: nothing says where on the ride's clock the track falls.
-    pub fn on_ride_clock(mut self, t0_unix_s: Option<f64>, ride: &str) -> Result<Self, LoadError> {
-        if self.clock == Clock::Ride {
-            return Ok(self);
+    /// (`t_ride = t_unix - t0_unix_s`; a boot-clock track: `t0_boot_s`); a
+    /// track already on the ride's clock as it is. A UTC track and a ride
+    /// without `t0_unix_s` is an error naming both: nothing says where on the
+    /// ride's clock the track falls.
+    pub fn on_ride_clock(
+        mut self,
+        t0_unix_s: Option<f64>,
+        t0_boot_s: Option<f64>,
+        ride: &str,
+    ) -> Result<Self, LoadError> {
+        match (self.clock, t0_boot_s) {
+            (Clock::Ride, _) => return Ok(self),
+            (Clock::Boot, Some(t0)) => {
+                for t in &mut self.t_s {
+                    *t -= t0;
+                }
+                self.clock = Clock::Ride;
+                return Ok(self);
+            }
+            (Clock::Boot, None) => {
+                return Err(LoadError::File {
+                    file: self.source.clone(),
+                    message: format!(
+                        "its times are on a device's boot clock, and {ride} has no t0_boot_s (the boot time of its t_s = 0) to put them on the ride's clock"
+                    ),
+                });
+            }
+            _ => {}
         }
         let Some(t0) = t0_unix_s else {
             return Err(LoadError::File {
@@ -88,6 +115,9 @@ impl ReferenceTrack {
 
 /// Read a reference track (see the module documentation).
 pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
+    if super::comma2k19::has_global_pose(path) {
+        return super::comma2k19::read_reference(path);
+    }
     let file = path.display().to_string();
     let bytes = std::fs::read(path).map_err(|error| LoadError::Io {
         file: file.clone(),
@@ -462,7 +492,9 @@ mod tests {
         assert_eq!(r.clock, Clock::TimeOfDay);
         assert_eq!(r.t_s, vec![86_399.0, 86_400.5]);
         // A ride that starts at 00:00:10 on 7 Feb puts the first fix 11 s before it.
-        let on = r.on_ride_clock(Some(1_581_033_610.0), "ride.csv").unwrap();
+        let on = r
+            .on_ride_clock(Some(1_581_033_610.0), None, "ride.csv")
+            .unwrap();
         assert_eq!(on.t_s, vec![-11.0, -9.5]);
         let unreadable =
             sentence("GPGGA,12x000.00,3725.58,N,12205.61,W,1,15,1.0,6.8,M,,M,,").repeat(2);
@@ -492,11 +524,14 @@ mod tests {
         assert!(r.has_alt && r.points[1].alt_m.is_nan());
         let on = r
             .clone()
-            .on_ride_clock(Some(1_581_041_670.0), "ride.csv")
+            .on_ride_clock(Some(1_581_041_670.0), None, "ride.csv")
             .unwrap();
         assert_eq!(on.t_s, vec![1.0, 2.5]);
         assert_eq!(on.clock, Clock::Ride);
-        let e = r.on_ride_clock(None, "ride.csv").unwrap_err().to_string();
+        let e = r
+            .on_ride_clock(None, None, "ride.csv")
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("t.gpx") && e.contains("ride.csv has no t0_unix_s"),
             "{e}"
@@ -526,7 +561,7 @@ mod tests {
         // The u-blox log of the same drive starts at 2020-02-07 02:14:17 UTC.
         let on = span
             .clone()
-            .on_ride_clock(Some(1_581_041_657.0), "ublox")
+            .on_ride_clock(Some(1_581_041_657.0), None, "ublox")
             .unwrap();
         assert_eq!(on.t_s[0], -46.0);
         assert!((span.points[0].lat_deg - 37.4264).abs() < 1e-3);

@@ -134,6 +134,8 @@ enum Known {
     Lat,
     Lon,
     GpsAlt,
+    GpsSpeed,
+    GpsCourse,
     Hacc,
     Vacc,
     Baro,
@@ -143,7 +145,7 @@ enum Known {
 }
 
 /// Names of the known columns, in the order [`write`] writes them.
-const KNOWN: [(&str, Known); 16] = [
+const KNOWN: [(&str, Known); 18] = [
     ("t_s", Known::T),
     ("gx_dps", Known::Gx),
     ("gy_dps", Known::Gy),
@@ -154,6 +156,8 @@ const KNOWN: [(&str, Known); 16] = [
     ("lat_deg", Known::Lat),
     ("lon_deg", Known::Lon),
     ("gps_alt_m", Known::GpsAlt),
+    ("gps_speed_mps", Known::GpsSpeed),
+    ("gps_course_deg", Known::GpsCourse),
     ("gps_hacc_m", Known::Hacc),
     ("gps_vacc_m", Known::Vacc),
     ("baro_alt_m", Known::Baro),
@@ -177,6 +181,8 @@ struct Columns {
     odo: Option<usize>,
     speed: Option<usize>,
     alt: Option<usize>,
+    gps_speed: Option<usize>,
+    gps_course: Option<usize>,
     hacc: Option<usize>,
     vacc: Option<usize>,
     baro: Option<usize>,
@@ -230,10 +236,11 @@ impl Columns {
         let lat = require(Known::Lat, "lat_deg")?;
         let lon = require(Known::Lon, "lon_deg")?;
         let (pulse, odo, speed) = (find(Known::Pulse), find(Known::Odo), find(Known::Speed));
-        if pulse.is_none() && odo.is_none() && speed.is_none() {
+        let gps_speed = find(Known::GpsSpeed);
+        if pulse.is_none() && odo.is_none() && speed.is_none() && gps_speed.is_none() {
             return Err(field_err(
                 "wheel_pulse",
-                "the log needs a distance column: 'wheel_pulse', 'odo_m' or 'speed_mps'".into(),
+                "the log needs a distance column: 'wheel_pulse', 'odo_m', 'speed_mps' or 'gps_speed_mps'".into(),
             ));
         }
         let accel = match (find(Known::Ax), find(Known::Ay), find(Known::Az)) {
@@ -265,6 +272,8 @@ impl Columns {
             odo,
             speed,
             alt: find(Known::GpsAlt),
+            gps_speed,
+            gps_course: find(Known::GpsCourse),
             hacc: find(Known::Hacc),
             vacc: find(Known::Vacc),
             baro: find(Known::Baro),
@@ -330,6 +339,8 @@ impl<'c> RowReader<'c> {
             odo_m: some_if(columns.odo),
             speed_mps: some_if(columns.speed),
             gps_alt_m: some_if(columns.alt),
+            gps_speed_mps: some_if(columns.gps_speed),
+            gps_course_deg: some_if(columns.gps_course),
             gps_hacc_m: some_if(columns.hacc),
             gps_vacc_m: some_if(columns.vacc),
             baro_alt_m: some_if(columns.baro),
@@ -428,6 +439,8 @@ impl<'c> RowReader<'c> {
         let speed = optional(c.speed)?;
         let alt = optional(c.alt)?;
         let baro = optional(c.baro)?;
+        let gps_speed = row.in_range(c.gps_speed, 0.0..=1000.0, "a ground speed in m/s")?;
+        let gps_course = row.in_range(c.gps_course, -360.0..=360.0, "a course in degrees")?;
         let hacc = row.accuracy(c.hacc)?;
         let vacc = row.accuracy(c.vacc)?;
         let accel = match c.accel {
@@ -445,6 +458,8 @@ impl<'c> RowReader<'c> {
             (&mut log.odo_m, odo),
             (&mut log.speed_mps, speed),
             (&mut log.gps_alt_m, alt),
+            (&mut log.gps_speed_mps, gps_speed),
+            (&mut log.gps_course_deg, gps_course),
             (&mut log.baro_alt_m, baro),
             (&mut log.gps_hacc_m, hacc),
             (&mut log.gps_vacc_m, vacc),
@@ -587,6 +602,24 @@ impl Row<'_, '_> {
     }
 
     /// A 1-sigma accuracy: positive where given.
+    /// An optional column whose values must lie in `range` (`what` says what they are).
+    fn in_range(
+        &self,
+        i: Option<usize>,
+        range: std::ops::RangeInclusive<f64>,
+        what: &str,
+    ) -> Result<Option<Option<f64>>, LoadError> {
+        let Some(i) = i else { return Ok(None) };
+        match self.number(i)? {
+            Some(v) if !range.contains(&v) => Err(self.reader.field_err(
+                self.line,
+                self.name(i),
+                format!("{v} is not {what} ({} to {})", range.start(), range.end()),
+            )),
+            v => Ok(Some(v)),
+        }
+    }
+
     fn accuracy(&self, i: Option<usize>) -> Result<Option<Option<f64>>, LoadError> {
         let Some(i) = i else { return Ok(None) };
         match self.number(i)? {
@@ -648,8 +681,10 @@ pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
         }
     }
     header.extend(["lat_deg", "lon_deg"]);
-    let late: [(&str, &Option<Vec<Option<f64>>>); 4] = [
+    let late: [(&str, &Option<Vec<Option<f64>>>); 6] = [
         ("gps_alt_m", &log.gps_alt_m),
+        ("gps_speed_mps", &log.gps_speed_mps),
+        ("gps_course_deg", &log.gps_course_deg),
         ("gps_hacc_m", &log.gps_hacc_m),
         ("gps_vacc_m", &log.gps_vacc_m),
         ("baro_alt_m", &log.baro_alt_m),
@@ -790,9 +825,32 @@ mod tests {
         assert!(e.contains("column 'ay_mps2'"), "{e}");
     }
 
+    /// A log with no wheel sensor: the receiver's speed and course.
+    const GNSS_SPEED: &str = "t_s,gx_dps,gy_dps,gz_dps,lat_deg,lon_deg,gps_speed_mps,gps_course_deg\n0,0.1,0.2,0.3,47.5,19.0,4.25,271.5\n0.01,0.1,0.2,0.3,,,,\n";
+
+    #[test]
+    fn reads_the_receivers_speed_and_course() {
+        let log = parse(GNSS_SPEED.as_bytes(), "gnss.csv").unwrap();
+        assert_eq!(log.gps_speed_mps.as_ref().unwrap(), &vec![Some(4.25), None]);
+        assert_eq!(
+            log.gps_course_deg.as_ref().unwrap(),
+            &vec![Some(271.5), None]
+        );
+        assert!(log.odo_m.is_none() && log.speed_mps.is_none());
+        let e = err(&GNSS_SPEED.replace(",4.25,", ",-0.5,"));
+        assert!(
+            e.starts_with("bad.csv:2: column 'gps_speed_mps': -0.5 is not a ground speed"),
+            "{e}"
+        );
+        let e = err(&GNSS_SPEED.replace(",271.5", ",400"));
+        assert!(e.starts_with("bad.csv:2: column 'gps_course_deg'"), "{e}");
+        let e = err(&GNSS_SPEED.replace(",gps_speed_mps", ",speed_over_ground"));
+        assert!(e.contains("'gps_speed_mps'"), "{e}");
+    }
+
     #[test]
     fn what_is_written_reads_back_the_same() {
-        for text in [GOOD, NEW_COLUMNS] {
+        for text in [GOOD, NEW_COLUMNS, GNSS_SPEED] {
             let log = parse(text.as_bytes(), "a.csv").unwrap();
             let mut out = Vec::new();
             write(&log, &mut out).unwrap();
@@ -804,6 +862,8 @@ mod tests {
             assert_eq!(back.speed_mps, log.speed_mps);
             assert_eq!(back.gps_alt_m, log.gps_alt_m);
             assert_eq!(back.gps_hacc_m, log.gps_hacc_m);
+            assert_eq!(back.gps_speed_mps, log.gps_speed_mps);
+            assert_eq!(back.gps_course_deg, log.gps_course_deg);
             assert_eq!(back.baro_alt_m, log.baro_alt_m);
             assert_eq!(back.accel_mps2, log.accel_mps2);
             assert_eq!(back.channels, log.channels);

@@ -27,7 +27,6 @@ use crate::export::{ExportError, FitReport, write_atomically};
 use crate::model::Uncertainty;
 use crate::optimisation::Reconstruction;
 use crate::pipeline::{self, MatchedReference, Origin};
-use crate::signals::Odometer;
 
 /// The page's template.
 const TEMPLATE: &str = include_str!("../../assets/report.html");
@@ -441,16 +440,7 @@ fn ride_items(c: &Contents, r: &FitReport) -> Vec<Item> {
             format!(
                 "{:.2} km as logged, from {}",
                 distance / 1000.0,
-                match sig.odometer {
-                    Odometer::WheelPulses {
-                        circumference_m,
-                        revolutions,
-                    } => format!(
-                        "wheel pulses ({revolutions} revolutions of {circumference_m:.3} m)"
-                    ),
-                    Odometer::Cumulative => "a cumulative distance".into(),
-                    Odometer::Speed => "a logged forward speed, integrated".into(),
-                }
+                sig.odometer.describe()
             ),
         ),
         item(
