@@ -9,6 +9,9 @@
 //! with the significance figure (all three under the ranking's noise, as
 //! `diagnose` measures them), the refitted model's own error to the fixes
 //! and to a reference track when one is given, and the time taken.
+//!
+//! The measurements and the history behind these choices: docs/command-
+//! line.md (`gyropath explain`) and docs/app.md (the Explain button).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;

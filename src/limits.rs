@@ -14,6 +14,9 @@
 //! | start tilt of the sensor | 30 deg | a sensor is mounted near upright (the fit's own prior is 10 deg); more means the vertical axis is not z, or the roll and pitch rates do not describe the vehicle |
 //! | mounting misalignment | 20 deg | a bracket is a few degrees off; 90 or 180 is a swapped or flipped axis |
 //! | gyro scale error | 20 % | MEMS scale errors are a few percent; 57x or 1/57 is rad/s against deg/s |
+//!
+//! The measurements and the history behind these choices: docs/vehicles.md
+//! (physical limits, measured on real drives).
 
 use crate::effects::DEG_PER_RAD;
 use crate::model::{Model, PathAt};

@@ -4,6 +4,9 @@
 //! (`fit`, a batch, `diagnose`) and the app's worker each call these steps,
 //! so a change to the journey (what a report holds, when a fit is no
 //! result) is made once, here.
+//!
+//! The measurements and the history behind these choices:
+//! docs/architecture.md (the layers and the data's path through them).
 
 use std::path::Path;
 use std::sync::Arc;

@@ -5,6 +5,9 @@
 //! Row `j` of the log closes the step `(t_{j-1}, t_j]`: its gyro value is the
 //! mean rate over that step and `distance[j]` the odometer distance covered in
 //! it. Row 0 only fixes the start (`dt[0] = 0`, `distance[0] = 0`).
+//!
+//! The measurements and the history behind these choices: data/ride-log-
+//! format.md (the columns) and docs/vehicles.md (planar or 3D).
 
 use nalgebra::Vector3;
 use thiserror::Error;
@@ -60,6 +63,9 @@ pub struct Signals {
     pub frame: LocalFrame,
     pub has_baro: bool,
     pub has_gps_alt: bool,
+    /// Whether the log has the GNSS receiver's speed (two samples or more):
+    /// a distance without the odometer (`--distance gnss`).
+    pub has_gnss_speed: bool,
     /// Extra channels, interpolated over empty fields.
     pub channels: Vec<(String, Vec<f64>)>,
     /// How distance was measured, for reports.
@@ -406,6 +412,10 @@ impl Signals {
             warnings,
             t0_unix_s,
             t0_boot_s,
+            has_gnss_speed: log
+                .gps_speed_mps
+                .as_ref()
+                .is_some_and(|s| s.iter().flatten().count() >= 2),
         })
     }
 

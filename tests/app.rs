@@ -612,3 +612,38 @@ fn explain_adds_the_missing_effect_and_stops_when_nothing_more_is_significant() 
     assert!(h.state().explaining.is_none());
     h.get_by_label("Explain");
 }
+
+/// A comma2k19 segment (a folder of NumPy arrays) opens as a ride; the
+/// Source panel says the distance is the CAN odometer's, and choosing the
+/// GNSS speed reloads it with the distance from the u-blox speed.
+#[test]
+fn a_comma_segment_opens_and_its_distance_can_come_from_the_gnss_speed() {
+    let segment = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/formats/comma2k19-segment/segment");
+    let app = GyropathApp::new(
+        manual_settings(),
+        gyropath::app::worker::RideSource::file(segment),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a.ride.is_some()),
+        "the segment loads: error {:?}",
+        h.state().error
+    );
+    h.get_by_label_contains("comma2k19 segment");
+    h.get_by_label("from a cumulative distance");
+    h.get_by_value("auto").click();
+    h.run_steps(2);
+    h.get_by_label("GNSS speed").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .ride
+            .as_ref()
+            .is_some_and(
+                |r| r.distance.starts_with("the GNSS speed") && a.loading.is_none()
+            )),
+        "reloaded with the GNSS speed"
+    );
+    h.get_by_label_contains("from the GNSS speed, integrated (no wheel sensor; 577 samples");
+}

@@ -24,7 +24,11 @@ impl GyropathApp {
                 if ui.button("Open ride or bag...").clicked() {
                     commands.push(Command::PickRide);
                 }
-                if ui.button("Open ROS 2 bag folder...").clicked() {
+                if ui
+                    .button("Open folder...")
+                    .on_hover_text("A ROS 2 bag (rosbag2 folder) or a comma2k19 segment")
+                    .clicked()
+                {
                     commands.push(Command::PickBagFolder);
                 }
                 if ui.button("Open the sample ride").clicked() {
@@ -109,6 +113,11 @@ impl GyropathApp {
 /// comments) names `t_s`, `lat_deg` and `lon_deg` but no gyro column.
 fn is_reference_track(path: &std::path::Path) -> bool {
     use std::io::BufRead;
+    // A comma2k19 segment's pose: its `global_pose` folder (the segment
+    // itself is a ride).
+    if path.is_dir() {
+        return is_pose_folder(path);
+    }
     let Ok(file) = std::fs::File::open(path) else {
         return false;
     };
@@ -121,4 +130,9 @@ fn is_reference_track(path: &std::path::Path) -> bool {
     let columns: Vec<&str> = header.split(',').map(str::trim).collect();
     let has = |c: &str| columns.contains(&c);
     has("t_s") && has("lat_deg") && has("lon_deg") && !columns.iter().any(|c| c.ends_with("_dps"))
+}
+
+/// A `global_pose` folder of a comma2k19 segment, not the segment itself.
+fn is_pose_folder(path: &std::path::Path) -> bool {
+    crate::import::comma2k19::has_global_pose(path) && !crate::import::comma2k19::is_segment(path)
 }

@@ -10,6 +10,9 @@
 //! its own (`impl GyropathApp` blocks): `menu`, `source`, `fit_panel`,
 //! `settings_panel`, `effects_panel`, `plots`, `history_panel`,
 //! `diagnosis_panel`, `examples`; `map_tiles` draws the map's background.
+//!
+//! The measurements and the history behind these choices: docs/app.md (the
+//! panels, the model history, the map).
 
 mod diagnosis_panel;
 mod effects_panel;
@@ -426,7 +429,7 @@ impl GyropathApp {
                 spawn_dialog(move || {
                     if let Some(p) = rfd::FileDialog::new()
                         .add_filter(
-                            "reference track (t_s,lat_deg,lon_deg[,alt_m] CSV, GPX, NMEA)",
+                            "reference track (t_s,lat_deg,lon_deg[,alt_m] CSV, GPX, NMEA; a comma2k19 global_pose folder: drop it on the window)",
                             &["csv", "gpx", "gga", "nmea"],
                         )
                         .pick_file()

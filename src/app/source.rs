@@ -4,7 +4,7 @@
 //! itself holds no state and computes nothing.
 
 use crate::import::timeline::Role;
-use crate::import::{ImportOptions, Level, MountChoice, TopicChoice};
+use crate::import::{DistanceChoice, ImportOptions, Level, MountChoice, TopicChoice};
 
 use super::Command;
 use super::worker::{RideSource, RideView};
@@ -118,8 +118,48 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
     .response
     .on_hover_text(ride.attitude.describe());
     ui.small(ride.attitude.describe());
-    ui.label(format!("distance: {}", ride.distance));
+    if ride.has_gnss_speed {
+        distance_ui(ui, ride, path, options, commands);
+    } else {
+        ui.label(format!("distance: {}", ride.distance));
+    }
     checks_ui(ui, ride);
+}
+
+/// Where the distance comes from, for a log that has the GNSS speed: its
+/// odometer (when it has one) or the GNSS speed; choosing reloads the ride.
+fn distance_ui(
+    ui: &mut egui::Ui,
+    ride: &RideView,
+    path: &std::path::Path,
+    options: &ImportOptions,
+    commands: &mut Vec<Command>,
+) {
+    ui.horizontal(|ui| {
+        let name = ui.label("distance").id;
+        let mut picked = options.distance;
+        egui::ComboBox::from_id_salt("distance")
+            .selected_text(match options.distance {
+                DistanceChoice::Auto => "auto",
+                DistanceChoice::Gnss => "GNSS speed",
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(
+                    &mut picked,
+                    DistanceChoice::Auto,
+                    "auto (the odometer when logged)",
+                );
+                ui.selectable_value(&mut picked, DistanceChoice::Gnss, "GNSS speed");
+            })
+            .response
+            .labelled_by(name);
+        if picked != options.distance {
+            commands.push(reload(path, options, |o| o.distance = picked));
+        }
+    })
+    .response
+    .on_hover_text(&ride.distance);
+    ui.small(format!("from {}", ride.distance));
 }
 
 /// The checks' verdicts, the worst first, coloured by how much they matter.

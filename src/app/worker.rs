@@ -121,6 +121,8 @@ pub struct RideView {
     pub attitude: crate::signals::Attitude,
     /// Where the distance came from (wheel sensor, odometer, GNSS speed), in words.
     pub distance: String,
+    /// Whether the log has the GNSS receiver's speed (a distance without the odometer).
+    pub has_gnss_speed: bool,
     /// The local frame the fixes are in (for the map's tiles).
     pub frame: crate::geodesy::LocalFrame,
 }
@@ -657,6 +659,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         origin,
         attitude: sig.attitude.clone(),
         distance: sig.odometer.describe(),
+        has_gnss_speed: sig.has_gnss_speed,
         frame: sig.frame.clone(),
     }
 }

@@ -1,5 +1,8 @@
 //! Seeing where the model fails: residuals in the frame of travel, the fitted
 //! bias per segment, held-out validation and the ranking of missing effects.
+//!
+//! The measurements and the history behind these choices: docs/diagnosis.md
+//! (how the missing effect is found, and the validation behind it).
 
 pub mod absurd;
 pub mod ranking;

@@ -12,6 +12,9 @@
 //! cross-track parts are `e_j` on the path's horizontal heading `f_j` and on
 //! `up x f_j` (left positive). Heights are compared only where both the
 //! reference and the ride have them (GPS altitude or a barometer).
+//!
+//! The measurements and the history behind these choices: docs/command-
+//! line.md (reference tracks) and docs/real-drives.md.
 
 use nalgebra::Vector3;
 use thiserror::Error;

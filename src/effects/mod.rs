@@ -19,6 +19,9 @@
 //! stays one O(N) backward sweep and the Jacobian one O(N) forward sweep
 //! whatever the combination. Adding an effect = one file here plus one line
 //! in [`build`].
+//!
+//! The measurements and the history behind these choices: docs/effects.md
+//! (the catalogue, and how to add an effect).
 
 mod baro_drift;
 mod baro_offset;

@@ -10,6 +10,9 @@
 //! integrating speed) lives in [`timeline`], so a new format is one new file.
 //! Every rejection names the file and, where there is one, the line and
 //! column or the topic; a bad input never panics and never loads half.
+//!
+//! The measurements and the history behind these choices: docs/real-logs.md
+//! (every format, the checks and the mounting, with worked examples).
 
 pub mod checks;
 pub mod comma2k19;
@@ -237,9 +240,62 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
     )
 }
 
+/// What a GNSS-only file is, when `path` is one (GPX, NMEA 0183, Garmin
+/// FIT: no gyro), told by its content: a ride needs a gyro, so opening one
+/// as a ride says what it is and how it can serve instead.
+fn gnss_only(path: &Path) -> Option<String> {
+    let mut head = [0u8; 64];
+    let n = std::fs::File::open(path)
+        .and_then(|mut f| ros1::read_full(&mut f, &mut head))
+        .ok()?;
+    let head = &head[..n];
+    let text = String::from_utf8_lossy(head);
+    let trimmed = text.trim_start_matches('\u{feff}').trim_start();
+    if head.len() >= 12 && &head[8..12] == b".FIT" {
+        return Some(
+            "a Garmin FIT activity: GNSS positions and speeds from a bike computer or watch, no gyro; gyropath does not read FIT files yet (export the activity as GPX to use it as a reference track)".into(),
+        );
+    }
+    let parse: fn(&[u8], &str) -> Result<ReferenceTrack, LoadError> =
+        if trimmed.starts_with("<?xml") || trimmed.starts_with("<gpx") {
+            reference::parse_gpx
+        } else if trimmed.starts_with('$') {
+            reference::parse_nmea
+        } else {
+            return None;
+        };
+    let what = if trimmed.starts_with('$') {
+        "NMEA 0183"
+    } else {
+        "a GPX track"
+    };
+    let track = std::fs::read(path)
+        .ok()
+        .map(|bytes| (what, parse(&bytes, &path.display().to_string())));
+    track.map(|(what, read)| match read {
+        Ok(r) => format!(
+            "{what} of {} points over {:.0} s: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track)",
+            r.t_s.len(),
+            r.t_s.last().zip(r.t_s.first()).map_or(0.0, |(l, f)| l - f),
+            path.display()
+        ),
+        Err(e) => format!("{what}: GNSS only, no gyro, and not readable as a reference track either: {e}"),
+    })
+}
+
 /// Read any supported input, check it, and mount it as `options` say.
 pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError> {
     let kind = detect(path, options)?;
+    if kind == SourceKind::RideCsv
+        && let Some(what) = gnss_only(path)
+    {
+        return Err(LoadError::File {
+            file: path.display().to_string(),
+            message: format!(
+                "{what}. A path needs a gyro: a ride log, a bag or a comma2k19 segment"
+            ),
+        });
+    }
     let (mut log, topics): (RideLog, Option<Topics>) = match kind {
         SourceKind::RideCsv => (load_file(path)?, None),
         SourceKind::Ros1Bag => {

@@ -15,6 +15,9 @@
 //! `r = (p_{i_k} - z_k) / sigma` for east, north, GPS up (if the fix has an
 //! altitude) and barometric up (if the log has a barometer), and the cost is
 //! `C = sum r^2` plus prior rows (eq. 7 with weights `1/sigma^2`).
+//!
+//! The measurements and the history behind these choices: docs/method.md (the
+//! model and its O(N) gradient).
 
 mod adjoint;
 mod chain;

@@ -11,6 +11,9 @@
 //! [`super::jacobian`]) turn into the path's covariance
 //! `Cov(p_j) = H_j P H_j^T`. A model without segment biases is small enough
 //! for the dense normal equations (parameters only).
+//!
+//! The measurements and the history behind these choices: docs/uncertainty.md
+//! (how well the sigmas hold the truth, measured).
 
 use nalgebra::DVector;
 

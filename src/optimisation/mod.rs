@@ -17,6 +17,9 @@
 //! one iteration and reports it; [`Reconstruction::apply_settings`] changes
 //! segment length, method, step size, damping or model between iterations
 //! without starting over (parameters carry over, segments are re-mapped).
+//!
+//! The measurements and the history behind these choices: docs/method.md
+//! (step 1, step 2, the LM that cannot diverge).
 
 pub mod gd;
 pub mod lm;

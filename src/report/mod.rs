@@ -12,6 +12,9 @@
 //! 95 % band, outages, the reference), residuals along and across the
 //! track and vertical, the bias per segment, the model history, the
 //! diagnosis, and the settings and version that made it.
+//!
+//! The measurements and the history behind these choices: docs/command-
+//! line.md ("--html": what the page holds).
 
 pub mod figures;
 pub mod svg;

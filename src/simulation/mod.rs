@@ -14,6 +14,9 @@
 //! The gyro reading of row `k` is the exact mean body rate over
 //! `(t_{k-1}, t_k]`, `Log(R_{k-1}^T R_k) / dt`, computed from the true
 //! attitudes: no integration scheme is shared with the model.
+//!
+//! The measurements and the history behind these choices: docs/accuracy.md
+//! and docs/real-drives.md (the simulator against the real drives).
 
 pub mod reflections;
 pub mod rng;
