@@ -327,7 +327,8 @@ impl Signals {
             ));
         }
 
-        let (distance, odometer) = odometer_distance(log)?;
+        let turning: Vec<f64> = gyro.iter().map(|w| w.norm().to_degrees()).collect();
+        let (distance, odometer) = odometer_distance(log, &turning)?;
         let time = |key: &str, what: &str| -> Result<Option<f64>, SignalError> {
             match log.metadata.get(key).map(|v| v.trim()) {
                 None => Ok(None),
@@ -428,9 +429,23 @@ impl Signals {
     }
 }
 
+/// How fast the sensor turns on each row (deg/s, the norm of the rates in
+/// `gyro_dps`): with the GNSS speed, whether a vehicle stands.
+pub fn turn_rates_dps(gyro_dps: &[[f64; 3]]) -> Vec<f64> {
+    gyro_dps
+        .iter()
+        .map(|g| (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt())
+        .collect()
+}
+
 /// Per-step odometer distance of a log, from whichever odometer it has
-/// (cumulative distance, then speed, then wheel pulses), and which it was.
-pub fn odometer_distance(log: &RideLog) -> Result<(Vec<f64>, Odometer), SignalError> {
+/// (cumulative distance, then speed, then wheel pulses, then the GNSS speed,
+/// which also needs `turn_dps`, the rows' turn rates, to tell a stop), and
+/// which it was.
+pub fn odometer_distance(
+    log: &RideLog,
+    turn_dps: &[f64],
+) -> Result<(Vec<f64>, Odometer), SignalError> {
     if let Some(odo) = &log.odo_m {
         Ok((distance_from_odometer(odo, log)?, Odometer::Cumulative))
     } else if let Some(speed) = &log.speed_mps {
@@ -438,7 +453,7 @@ pub fn odometer_distance(log: &RideLog) -> Result<(Vec<f64>, Odometer), SignalEr
     } else if let Some(speed) = &log.gps_speed_mps
         && log.wheel_pulse.is_none()
     {
-        let (d, kind) = distance_from_gnss_speed(speed, log)?;
+        let (d, kind) = distance_from_gnss_speed(speed, log, turn_dps)?;
         Ok((d, kind))
     } else if let Some(pulses) = &log.wheel_pulse {
         let c: f64 = log
@@ -502,6 +517,7 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 pub fn distance_from_gnss_speed(
     speed: &[Option<f64>],
     log: &RideLog,
+    turn_dps: &[f64],
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     let samples: Vec<usize> = (0..speed.len()).filter(|&i| speed[i].is_some()).collect();
     if samples.len() < 2 {
@@ -524,10 +540,7 @@ pub fn distance_from_gnss_speed(
             gaps.push((a, b));
         }
     }
-    let still = |j: usize| {
-        let g = log.gyro_dps[j];
-        (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt() < STANDING_RATE_DPS
-    };
+    let still = |j: usize| turn_dps.get(j).is_some_and(|&w| w < STANDING_RATE_DPS);
     let mut d = vec![0.0; v.len()];
     let mut standing_s = 0.0;
     for j in 1..v.len() {
@@ -911,7 +924,7 @@ mod attitude_tests {
             })
             .collect();
         log.odo_m = Some(odo);
-        let (d, _) = odometer_distance(&log).unwrap();
+        let (d, _) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
         assert!(d[1] > 0.0 && d[n - 2] < 0.0);
         assert!((d.iter().sum::<f64>() - (1.0 - 0.0001 * ((n - 1) % 2) as f64)).abs() < 1e-9);
         log.odo_m = None;
@@ -920,7 +933,7 @@ mod attitude_tests {
                 .map(|j| Some(if j < n / 2 { 2.0 } else { -1.0 }))
                 .collect(),
         );
-        let (d, kind) = odometer_distance(&log).unwrap();
+        let (d, kind) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
         assert_eq!(kind, Odometer::Speed);
         assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
     }
@@ -954,7 +967,7 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.05, -0.1, 0.2];
         }
-        let (d, kind) = odometer_distance(&log).unwrap();
+        let (d, kind) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
         let Odometer::GnssSpeed {
             samples,
             standing_s,
@@ -982,11 +995,13 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.0, 0.0, 20.0];
         }
-        let (turning, _) = odometer_distance(&log).unwrap();
+        let (turning, _) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
         assert!(turning.iter().sum::<f64>() > total + 0.4);
         // One sample cannot be integrated.
         log.gps_speed_mps = Some((0..n).map(|j| (j == 3).then_some(2.0)).collect());
-        let e = odometer_distance(&log).unwrap_err().to_string();
+        let e = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps))
+            .unwrap_err()
+            .to_string();
         assert!(
             e.contains("gps_speed_mps") && e.contains("1 GNSS speed sample"),
             "{e}"

@@ -62,3 +62,63 @@ fn fit_refuses_a_gpx_track_with_the_reason() {
         "{err}"
     );
 }
+
+/// A PX4 ULog of a VTOL standing on the ground (pyulog's
+/// `sample_log_small.ulg`, BSD-3-Clause): its gyro, accelerometer and GNSS
+/// read with their rates, the checks find gravity on +z (PX4's down axis
+/// made up), and a fit says the vehicle never moved instead of drawing a path.
+#[test]
+fn a_px4_ulog_reads_with_its_channels_and_a_standing_vehicle_is_said() {
+    let ulog = formats().join("ulog/sample_log_small.ulg");
+    let im = gyropath::pipeline::open(&ulog, &ImportOptions::default()).expect("open");
+    assert_eq!(im.kind, gyropath::import::SourceKind::Ulog);
+    let log = &im.log;
+    // sensor_combined: 1298 samples at about 200 Hz over 6.5 s.
+    assert_eq!(log.len(), 1298);
+    let rate = (log.len() - 1) as f64 / log.t_s[log.len() - 1];
+    assert!((195.0..210.0).contains(&rate), "{rate} Hz");
+    // vehicle_gps_position: 32 samples at 5 Hz with speed and course; one
+    // fix per second, in Trondheim.
+    let speeds = log.gps_speed_mps.as_ref().expect("GNSS speed");
+    assert_eq!(speeds.iter().flatten().count(), 32);
+    assert!(speeds.iter().flatten().all(|v| *v < 0.5), "standing");
+    assert!((6..=8).contains(&log.fix_count()), "{}", log.fix_count());
+    let (lat, lon) = log.fix.iter().flatten().next().copied().expect("fix");
+    assert!((lat - 63.417).abs() < 0.01 && (lon - 10.408).abs() < 0.01);
+    assert!(
+        log.gps_hacc_m
+            .as_ref()
+            .expect("eph")
+            .iter()
+            .flatten()
+            .all(|h| *h > 0.0)
+    );
+    // 21 April 2021 (time_utc_usec of the first fix).
+    let t0: f64 = log.metadata["t0_unix_s"].parse().expect("t0_unix_s");
+    assert!((t0 - 1_618_986_658.0).abs() < 10.0, "{t0}");
+    let verdict = |subject: &str| {
+        im.check
+            .verdicts
+            .iter()
+            .find(|v| v.subject == subject)
+            .unwrap_or_else(|| panic!("no verdict on {subject}: {:?}", im.check.verdicts))
+    };
+    assert!(verdict("vertical axis").message.contains("+z points up"));
+    assert!(verdict("accelerometer units").message.contains("gravity"));
+    assert_eq!(verdict("sample rate").level, gyropath::import::Level::Ok);
+    // Its distance is the GNSS speed's, and standing it stays put.
+    let signals = gyropath::pipeline::signals(im).expect("signals");
+    let gyropath::signals::Odometer::GnssSpeed { standing_s, .. } = signals.odometer else {
+        panic!("{:?}", signals.odometer);
+    };
+    assert!(standing_s > 5.0, "{standing_s} s standing");
+    assert!(signals.distance.iter().sum::<f64>() < 1.0);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .arg("fit")
+        .arg(&ulog)
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("a ride without motion"), "{err}");
+}

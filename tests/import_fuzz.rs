@@ -241,3 +241,54 @@ proptest! {
         }
     }
 }
+
+const ULOG: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/formats/ulog/sample_log_small.ulg"
+);
+
+const CAN_SPEED: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/formats/comma2k19-segment/segment/processed_log/CAN/speed/value"
+);
+
+/// A ULog's bytes read as a ride and turned into signals: the error, if any.
+fn read_ulog(bytes: &[u8]) -> Result<usize, String> {
+    let log = gyropath::import::ulog::parse(bytes, "fuzz.ulg").map_err(|e| e.to_string())?;
+    let n = log.len();
+    gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())?;
+    Ok(n)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 48, ..ProptestConfig::default() })]
+
+    /// A PX4 log cut off (a power loss) or with bytes flipped: an error
+    /// naming the file or the part before the damage, never a panic.
+    #[test]
+    fn damaged_ulogs_never_panic(cut in 0usize..1_000_000, flips in proptest::collection::vec((0usize..1_000_000, any::<u8>()), 0..8)) {
+        let mut bytes = std::fs::read(ULOG).unwrap();
+        for &(at, byte) in &flips {
+            let i = at % bytes.len();
+            bytes[i] ^= byte | 1;
+        }
+        let cut = cut % (bytes.len() + 1);
+        if let Err(e) = read_ulog(&bytes[..cut]) {
+            prop_assert!(e.contains("fuzz.ulg"), "{}", e);
+        }
+    }
+
+    /// A comma2k19 array cut off or damaged: an error naming it, never a panic.
+    #[test]
+    fn damaged_numpy_arrays_never_panic(cut in 0usize..100_000, flips in proptest::collection::vec((0usize..100_000, any::<u8>()), 0..4)) {
+        let mut bytes = std::fs::read(CAN_SPEED).unwrap();
+        for &(at, byte) in &flips {
+            let i = at % bytes.len();
+            bytes[i] ^= byte | 1;
+        }
+        let cut = cut % (bytes.len() + 1);
+        if let Err(e) = gyropath::import::npy::parse(&bytes[..cut], "fuzz/value") {
+            prop_assert!(e.to_string().contains("fuzz/value"), "{}", e);
+        }
+    }
+}

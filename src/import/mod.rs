@@ -24,6 +24,7 @@ pub mod ride_csv;
 pub mod ros1;
 pub mod ros2;
 pub mod timeline;
+pub mod ulog;
 pub mod wire;
 
 use std::path::{Path, PathBuf};
@@ -82,6 +83,8 @@ pub enum SourceKind {
     MappedCsv,
     /// A comma2k19 segment: a folder of NumPy arrays.
     Comma2k19,
+    /// A PX4 ULog (`ULog` magic, `.ulg`).
+    Ulog,
 }
 
 impl SourceKind {
@@ -92,6 +95,7 @@ impl SourceKind {
             Self::Ros2Mcap => "ROS 2 bag (MCAP)",
             Self::MappedCsv => "mapped CSV",
             Self::Comma2k19 => "comma2k19 segment",
+            Self::Ulog => "PX4 ULog",
         }
     }
 
@@ -99,7 +103,7 @@ impl SourceKind {
     pub fn default_mount(self) -> MountChoice {
         match self {
             Self::Ros1Bag | Self::Ros2Mcap => MountChoice::Auto,
-            Self::RideCsv | Self::MappedCsv | Self::Comma2k19 => MountChoice::AsLogged,
+            Self::RideCsv | Self::MappedCsv | Self::Comma2k19 | Self::Ulog => MountChoice::AsLogged,
         }
     }
 }
@@ -234,6 +238,8 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
             SourceKind::Ros1Bag
         } else if head.starts_with(ros2::MCAP_MAGIC) || ext.as_deref() == Some("mcap") {
             SourceKind::Ros2Mcap
+        } else if head.starts_with(ulog::MAGIC) || ext.as_deref() == Some("ulg") {
+            SourceKind::Ulog
         } else {
             SourceKind::RideCsv
         },
@@ -317,6 +323,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
             comma2k19::read(path, options.distance == DistanceChoice::Auto)?,
             None,
         ),
+        SourceKind::Ulog => (ulog::read(path)?, None),
     };
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;

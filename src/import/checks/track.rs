@@ -26,7 +26,8 @@ pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
     let dist =
-        crate::signals::odometer_distance(log).map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
+        crate::signals::odometer_distance(log, &crate::signals::turn_rates_dps(&log.gyro_dps))
+            .map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
     let mut s = 0.0;
     let mut turn = [0.0; 3];
     let mut acc_sum = [0.0; 3];
