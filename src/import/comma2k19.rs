@@ -35,6 +35,7 @@ use std::path::{Path, PathBuf};
 use super::LoadError;
 use super::npy::{self, Array};
 use super::reference::{Clock, ReferenceTrack};
+use super::timeline::{GnssSample, place_gnss};
 use crate::geodesy::Geodetic;
 use crate::ride::RideLog;
 
@@ -104,18 +105,6 @@ fn required(segment: &Path, name: &str, cols: usize) -> Result<Signal, LoadError
     Ok(s)
 }
 
-/// Index of the time in `t` (sorted) nearest `x`.
-fn nearest(t: &[f64], x: f64) -> usize {
-    let i = t.partition_point(|&v| v < x);
-    if i == 0 {
-        0
-    } else if i >= t.len() || x - t[i - 1] <= t[i] - x {
-        i - 1
-    } else {
-        i
-    }
-}
-
 /// Read a segment folder as a ride log; `with_odometer = false` leaves the
 /// CAN speed out, so the distance comes from the GNSS speed.
 pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
@@ -156,9 +145,6 @@ pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
             })
             .collect(),
         fix: vec![None; n],
-        gps_alt_m: Some(vec![None; n]),
-        gps_speed_mps: Some(vec![None; n]),
-        gps_course_deg: Some(vec![None; n]),
         metadata: BTreeMap::from([
             ("source".to_string(), format!("comma2k19 segment {name}")),
             ("t0_boot_s".to_string(), format!("{t0:.6}")),
@@ -173,52 +159,30 @@ pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
                 .collect(),
         );
     }
-    // Every u-blox sample's speed and course; one fix per second.
-    let first_ms = gnss.value.row(0)[3];
+    // Every u-blox sample's speed and course; one fix per second of its
+    // UTC stamps (the arrival times jitter by tens of milliseconds).
+    let mut samples = Vec::with_capacity(gnss.t.len());
     let mut skipped = 0usize;
-    // Per second counted from the first fix: the sample nearest it (the
-    // earlier of two as near), with its row.
-    let mut chosen: BTreeMap<i64, (f64, usize, usize)> = BTreeMap::new();
     for k in 0..gnss.t.len() {
         let v = gnss.value.row(k);
-        let (lat, lon, speed, ms, alt, course) = (v[0], v[1], v[2], v[3], v[4], v[5]);
-        if gnss.t[k] < t_boot[0] || gnss.t[k] > t_boot[n - 1] {
-            continue;
-        }
-        if ![lat, lon, speed, ms, alt, course]
-            .iter()
-            .all(|x| x.is_finite())
-            || !(-90.0..=90.0).contains(&lat)
-            || !(-180.0..=360.0).contains(&lon)
-            || speed < 0.0
-        {
+        if !v[..6].iter().all(|x| x.is_finite()) || v[2] < 0.0 {
             skipped += 1;
             continue;
         }
-        let row = nearest(&t_boot, gnss.t[k]);
-        if let Some(s) = log.gps_speed_mps.as_mut() {
-            s[row] = Some(speed);
-        }
-        if let Some(c) = log.gps_course_deg.as_mut() {
-            c[row] = Some(course.rem_euclid(360.0));
-        }
-        let second = ((ms - first_ms) / 1000.0).round();
-        let off = (ms - first_ms - 1000.0 * second).abs();
-        let best = chosen.entry(second as i64).or_insert((off, k, row));
-        if off < best.0 {
-            *best = (off, k, row);
-        }
+        samples.push(GnssSample {
+            t: gnss.t[k] - t0,
+            stamp: v[3] / 1000.0,
+            lat: v[0],
+            lon: v[1],
+            alt: Some(v[4]),
+            speed: Some(v[2]),
+            course: Some(v[5]),
+            hacc: None,
+        });
     }
-    for &(_, k, row) in chosen.values() {
-        let v = gnss.value.row(k);
-        log.fix[row] = Some((v[0], v[1]));
-        if let Some(a) = log.gps_alt_m.as_mut() {
-            a[row] = Some(v[4]);
-        }
-    }
-    if let Some(&(_, k, _)) = chosen.values().next() {
-        // The fix's UTC time less its age at arrival on the boot clock.
-        let t0_unix = gnss.value.row(k)[3] / 1000.0 - (gnss.t[k] - t0);
+    if let Some(first) = place_gnss(&mut log, &samples) {
+        // The first fix's UTC time less its age at arrival on the boot clock.
+        let t0_unix = first.stamp - first.t;
         log.metadata
             .insert("t0_unix_s".into(), format!("{t0_unix:.3}"));
     }

@@ -299,6 +299,120 @@ impl Recording {
     }
 }
 
+/// One GNSS sample of a device that logs its receiver apart from its gyro
+/// (cameras, autopilots, dashcams): its time on the ride's clock (s), and
+/// what it measured.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GnssSample {
+    pub t: f64,
+    /// The receiver's own time of the sample (s, any origin), by which its
+    /// seconds are counted: its UTC stamp where the log has one (arrival
+    /// times jitter), else `t`.
+    pub stamp: f64,
+    pub lat: f64,
+    pub lon: f64,
+    /// Height above the ellipsoid (m), where known.
+    pub alt: Option<f64>,
+    /// Ground speed (m/s) and course (degrees from north), where known.
+    pub speed: Option<f64>,
+    pub course: Option<f64>,
+    /// The receiver's horizontal accuracy (m), where known.
+    pub hacc: Option<f64>,
+}
+
+/// Put GNSS samples on the rows of `log` (times `log.t_s`): every sample's
+/// speed and course on the row nearest it (`gps_speed_mps`,
+/// `gps_course_deg`), and the sample nearest each second of its `stamp`
+/// counted from the first (the earlier of two as near) as a fix with its
+/// height and accuracy.
+/// One fix per second is the rate the model's GPS error is built for
+/// (receivers at 5-18 Hz repeat their own filter's state between seconds);
+/// the speed is kept at the receiver's rate, where the distance gains from it.
+/// Samples outside the rows' time, or with a position out of range, are left
+/// out; returns the first fix's sample, for the clock.
+pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSample> {
+    let n = log.t_s.len();
+    let (Some(&first_t), Some(&last_t)) = (log.t_s.first(), log.t_s.last()) else {
+        return None;
+    };
+    let t = &log.t_s;
+    let nearest = |x: f64| {
+        let i = t.partition_point(|&v| v < x);
+        if i == 0 {
+            0
+        } else if i >= n || x - t[i - 1] <= t[i] - x {
+            i - 1
+        } else {
+            i
+        }
+    };
+    let mut rows = Vec::with_capacity(samples.len());
+    let mut chosen: BTreeMap<i64, (f64, usize)> = BTreeMap::new();
+    let mut start = None;
+    for (k, s) in samples.iter().enumerate() {
+        let position = (-90.0..=90.0).contains(&s.lat)
+            && (-180.0..=360.0).contains(&s.lon)
+            && (s.lat, s.lon) != (0.0, 0.0);
+        if !position {
+            rows.push(None);
+            continue;
+        }
+        // Seconds count from the receiver's first fix, in the rows' time or not.
+        let t0 = *start.get_or_insert(s.stamp);
+        if !(s.t.is_finite() && (first_t..=last_t).contains(&s.t)) {
+            rows.push(None);
+            continue;
+        }
+        rows.push(Some(nearest(s.t)));
+        let second = (s.stamp - t0).round();
+        let off = (s.stamp - t0 - second).abs();
+        let best = chosen.entry(second as i64).or_insert((off, k));
+        // Within a microsecond is as near (stamps of 1e9 s carry 1e-7 s of
+        // rounding): the earlier stays.
+        if off < best.0 - 1e-6 {
+            *best = (off, k);
+        }
+    }
+    let column = |c: &mut Option<Vec<Option<f64>>>| {
+        c.get_or_insert_with(|| vec![None; n]);
+    };
+    column(&mut log.gps_speed_mps);
+    column(&mut log.gps_course_deg);
+    for (s, row) in samples.iter().zip(&rows) {
+        let Some(row) = *row else { continue };
+        if let (Some(col), Some(v)) = (log.gps_speed_mps.as_mut(), s.speed)
+            && v.is_finite()
+            && v >= 0.0
+        {
+            col[row] = Some(v);
+        }
+        if let (Some(col), Some(v)) = (log.gps_course_deg.as_mut(), s.course)
+            && v.is_finite()
+        {
+            col[row] = Some(v.rem_euclid(360.0));
+        }
+    }
+    if chosen.values().any(|&(_, k)| samples[k].alt.is_some()) {
+        column(&mut log.gps_alt_m);
+    }
+    if chosen.values().any(|&(_, k)| samples[k].hacc.is_some()) {
+        column(&mut log.gps_hacc_m);
+    }
+    for &(_, k) in chosen.values() {
+        let (s, Some(row)) = (samples[k], rows[k]) else {
+            continue;
+        };
+        log.fix[row] = Some((s.lat, s.lon));
+        if let Some(a) = log.gps_alt_m.as_mut() {
+            a[row] = s.alt.filter(|v| v.is_finite());
+        }
+        if let Some(h) = log.gps_hacc_m.as_mut() {
+            h[row] = s.hacc.filter(|v| v.is_finite() && *v > 0.0);
+        }
+    }
+    chosen.values().next().map(|&(_, k)| samples[k])
+}
+
 /// Sort messages by stamp (stable) and drop exact duplicates of a stamp.
 /// Returns how many were out of order and how many were dropped.
 fn sort_dedup<T>(v: &mut Vec<T>, stamp: impl Fn(&T) -> i64) -> (usize, usize) {

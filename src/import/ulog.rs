@@ -31,6 +31,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 use super::LoadError;
+use super::timeline::{GnssSample, place_gnss};
 use crate::ride::RideLog;
 
 /// The first bytes of every ULog file.
@@ -360,10 +361,6 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<RideLog, LoadError> {
                 .collect()
         }),
         fix: vec![None; n],
-        gps_alt_m: Some(vec![None; n]),
-        gps_hacc_m: Some(vec![None; n]),
-        gps_speed_mps: Some(vec![None; n]),
-        gps_course_deg: Some(vec![None; n]),
         metadata: BTreeMap::from([
             ("source".to_string(), format!("PX4 ULog {file}")),
             ("gyro_samples".to_string(), "instantaneous".to_string()),
@@ -402,69 +399,33 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<RideLog, LoadError> {
     let course = gps.column("cog_rad", 0);
     let eph = gps.column("eph", 0);
     let utc = gps.column("time_utc_usec", 0);
-    let t_row = log.t_s.clone();
-    let nearest = |t: f64| {
-        let i = t_row.partition_point(|&v| v < t);
-        if i == 0 {
-            0
-        } else if i >= n || t - t_row[i - 1] <= t_row[i] - t {
-            i - 1
-        } else {
-            i
-        }
-    };
-    let span = (t_row[0], t_row[n - 1]);
-    let mut chosen: BTreeMap<i64, (f64, usize)> = BTreeMap::new();
-    let mut first: Option<f64> = None;
-    for k in 0..gt.len() {
-        let t = (gt[k] - t0_us) * 1e-6;
-        let valid = fix_type[k] >= 3.0
-            && lat[k].is_finite()
-            && lon[k].is_finite()
-            && (-90.0..=90.0).contains(&lat[k])
-            && (-180.0..=360.0).contains(&lon[k])
-            && (lat[k], lon[k]) != (0.0, 0.0);
-        if !valid || t < span.0 || t > span.1 {
-            continue;
-        }
-        let row = nearest(t);
-        if let (Some(s), Some(v)) = (log.gps_speed_mps.as_mut(), &speed)
-            && v[k].is_finite()
-            && v[k] >= 0.0
-        {
-            s[row] = Some(v[k]);
-        }
-        if let (Some(c), Some(v)) = (log.gps_course_deg.as_mut(), &course)
-            && v[k].is_finite()
-        {
-            c[row] = Some(v[k].to_degrees().rem_euclid(360.0));
-        }
-        let start = *first.get_or_insert(t);
-        let second = (t - start).round();
-        let off = (t - start - second).abs();
-        let best = chosen.entry(second as i64).or_insert((off, k));
-        if off < best.0 {
-            *best = (off, k);
+    let samples: Vec<GnssSample> = (0..gt.len())
+        .filter(|&k| fix_type[k] >= 3.0)
+        .map(|k| {
+            let t = (gt[k] - t0_us) * 1e-6;
+            GnssSample {
+                t,
+                stamp: t,
+                lat: lat[k],
+                lon: lon[k],
+                alt: Some(alt[k]),
+                speed: speed.as_ref().map(|v| v[k]),
+                course: course.as_ref().map(|v| v[k].to_degrees()),
+                hacc: eph.as_ref().map(|v| v[k]),
+            }
+        })
+        .collect();
+    let first = place_gnss(&mut log, &samples);
+    if let (Some(first), Some(u)) = (first, &utc) {
+        // time_utc_usec of that fix, less its time on the ride's clock.
+        let k = (0..gt.len()).find(|&k| (gt[k] - t0_us) * 1e-6 == first.t);
+        if let Some(k) = k.filter(|&k| u[k] > 0.0) {
+            let t0_unix = u[k] * 1e-6 - first.t;
+            log.metadata
+                .insert("t0_unix_s".into(), format!("{t0_unix:.3}"));
         }
     }
-    for &(_, k) in chosen.values() {
-        let row = nearest((gt[k] - t0_us) * 1e-6);
-        log.fix[row] = Some((lat[k], lon[k]));
-        if let Some(a) = log.gps_alt_m.as_mut() {
-            a[row] = Some(alt[k]).filter(|v| v.is_finite());
-        }
-        if let (Some(h), Some(e)) = (log.gps_hacc_m.as_mut(), &eph) {
-            h[row] = Some(e[k]).filter(|v| v.is_finite() && *v > 0.0);
-        }
-    }
-    if let (Some(&(_, k)), Some(u)) = (chosen.values().next(), &utc)
-        && u[k] > 0.0
-    {
-        let t0_unix = u[k] * 1e-6 - (gt[k] - t0_us) * 1e-6;
-        log.metadata
-            .insert("t0_unix_s".into(), format!("{t0_unix:.3}"));
-    }
-    if chosen.is_empty() {
+    if first.is_none() {
         return Err(bad(format!(
             "{topic} has no 3D fix while the gyro runs: a path needs GNSS fixes"
         )));
