@@ -122,3 +122,81 @@ fn a_px4_ulog_reads_with_its_channels_and_a_standing_vehicle_is_said() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("a ride without motion"), "{err}");
 }
+
+/// A GoPro MAX's 10 s of hand-held walking (gopro/gpmf-parser's
+/// `max-heromode.mp4`, Apache-2.0 or MIT), read through telemetry-parser:
+/// the gyro at 197.5 Hz, GPS5 at 18 Hz with its 2-D speed, gravity on the
+/// camera's x axis (the checks recommend the mounting, applied by default),
+/// and a fit whose distance is the GNSS speed's.
+#[test]
+fn a_gopro_mp4_reads_through_telemetry_parser_and_fits_on_its_gnss_speed() {
+    let mp4 = formats().join("gopro_gpmf/max-heromode.mp4");
+    let im = gyropath::pipeline::open(&mp4, &ImportOptions::default()).expect("open");
+    assert_eq!(im.kind, gyropath::import::SourceKind::Camera);
+    let log = &im.log;
+    assert_eq!(log.len(), 2082);
+    let rate = (log.len() - 1) as f64 / log.t_s[log.len() - 1];
+    assert!((195.0..200.0).contains(&rate), "{rate} Hz");
+    let speeds = log.gps_speed_mps.as_ref().expect("GNSS speed");
+    let n = speeds.iter().flatten().count();
+    assert!((180..=200).contains(&n), "{n} GNSS samples");
+    assert!(speeds.iter().flatten().all(|v| *v < 2.0), "walking");
+    assert_eq!(log.fix_count(), 11);
+    let (lat, lon) = log.fix.iter().flatten().next().copied().expect("fix");
+    assert!((lat - 33.1268).abs() < 0.001 && (lon + 117.3273).abs() < 0.001);
+    // 18 November 2019, 23:45:14 UTC (GPSU of the first payload).
+    let t0: f64 = log.metadata["t0_unix_s"].parse().expect("t0_unix_s");
+    assert!((t0 - 1_574_120_714.0).abs() < 2.0, "{t0}");
+    assert_eq!(
+        im.check
+            .recommended
+            .as_ref()
+            .map(ToString::to_string)
+            .as_deref(),
+        Some("x=y,y=z,z=x")
+    );
+    assert_eq!(
+        im.mount.as_ref().map(ToString::to_string).as_deref(),
+        Some("x=y,y=z,z=x")
+    );
+    let signals = gyropath::pipeline::signals(im).expect("signals");
+    assert!(matches!(
+        signals.odometer,
+        gyropath::signals::Odometer::GnssSpeed { .. }
+    ));
+    let mut fit = gyropath::optimisation::Reconstruction::new(
+        signals.clone(),
+        gyropath::optimisation::FitSettings::default(),
+    )
+    .expect("fit");
+    fit.finish();
+    assert!(gyropath::pipeline::failure(&fit).is_none());
+    // About 14 m walked in 10.5 s.
+    let walked: f64 = signals.distance.iter().sum();
+    assert!((8.0..20.0).contains(&walked), "{walked} m");
+}
+
+/// A camera file cut short or damaged is an error naming it, never a panic
+/// (telemetry-parser's own panics are caught).
+#[test]
+fn a_damaged_camera_file_is_an_error_naming_it() {
+    let bytes = std::fs::read(formats().join("gopro_gpmf/max-heromode.mp4")).expect("read");
+    let dir = std::env::temp_dir().join(format!("gyropath-camera-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("mkdir");
+    let cut = dir.join("cut.mp4");
+    for n in [0, 12, 100, 5_000, bytes.len() / 3, bytes.len() - 100_000] {
+        std::fs::write(&cut, &bytes[..n]).expect("write");
+        if let Err(e) = gyropath::pipeline::open(&cut, &ImportOptions::default()) {
+            assert!(e.to_string().contains("cut.mp4"), "{e}");
+        }
+    }
+    let mut flipped = bytes.clone();
+    for at in (0..flipped.len()).step_by(7919) {
+        flipped[at] ^= 0x5a;
+    }
+    std::fs::write(&cut, &flipped).expect("write");
+    if let Err(e) = gyropath::pipeline::open(&cut, &ImportOptions::default()) {
+        assert!(e.to_string().contains("cut.mp4"), "{e}");
+    }
+    std::fs::remove_dir_all(&dir).expect("clean");
+}

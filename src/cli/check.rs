@@ -54,7 +54,7 @@ pub fn check(args: &CheckArgs) -> Result<()> {
                 text,
                 "mounting  recommended: --mount \"{m}\" ({})",
                 match imported.kind.default_mount() {
-                    MountChoice::Auto => "bags get it by default",
+                    MountChoice::Auto => "bags and camera files get it by default",
                     _ => "--mount auto applies it",
                 }
             )

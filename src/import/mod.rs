@@ -14,6 +14,7 @@
 //! The measurements and the history behind these choices: docs/real-logs.md
 //! (every format, the checks and the mounting, with worked examples).
 
+pub mod camera;
 pub mod checks;
 pub mod comma2k19;
 pub mod mapped_csv;
@@ -85,6 +86,8 @@ pub enum SourceKind {
     Comma2k19,
     /// A PX4 ULog (`ULog` magic, `.ulg`).
     Ulog,
+    /// A camera's telemetry (GoPro MP4 and what telemetry-parser reads).
+    Camera,
 }
 
 impl SourceKind {
@@ -96,13 +99,14 @@ impl SourceKind {
             Self::MappedCsv => "mapped CSV",
             Self::Comma2k19 => "comma2k19 segment",
             Self::Ulog => "PX4 ULog",
+            Self::Camera => "camera telemetry",
         }
     }
 
     /// Bags carry no mounting, so they are mounted by the checks unless told otherwise.
     pub fn default_mount(self) -> MountChoice {
         match self {
-            Self::Ros1Bag | Self::Ros2Mcap => MountChoice::Auto,
+            Self::Ros1Bag | Self::Ros2Mcap | Self::Camera => MountChoice::Auto,
             Self::RideCsv | Self::MappedCsv | Self::Comma2k19 | Self::Ulog => MountChoice::AsLogged,
         }
     }
@@ -240,6 +244,8 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
             SourceKind::Ros2Mcap
         } else if head.starts_with(ulog::MAGIC) || ext.as_deref() == Some("ulg") {
             SourceKind::Ulog
+        } else if camera::is_camera(path, head) {
+            SourceKind::Camera
         } else {
             SourceKind::RideCsv
         },
@@ -324,6 +330,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
             None,
         ),
         SourceKind::Ulog => (ulog::read(path)?, None),
+        SourceKind::Camera => (camera::read(path)?, None),
     };
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;

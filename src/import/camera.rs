@@ -1,0 +1,183 @@
+//! Action cameras and the other logs that gyroflow's `telemetry-parser`
+//! reads (GoPro GPMF inside MP4, Sony, Insta360, DJI, phone-app exports,
+//! Betaflight blackbox, ArduPilot): a camera on a handlebar or a dashboard
+//! logs a gyro, an accelerometer and, on GoPros, GNSS with its speed, but
+//! no wheel distance.
+//!
+//! What is read, and how it becomes a ride log:
+//!
+//! - **Rows**: the gyro samples as the parser normalises them (deg/s, in the
+//!   camera's IMU axes, which `gyropath check` names and `--mount auto`
+//!   turns to x forward, y left, z up: cameras are mounted every way), with
+//!   the accelerometer (m/s^2) for those checks; instantaneous samples.
+//! - **GNSS** (GoPro `GPS5`: latitude, longitude, height, 2-D and 3-D speed
+//!   at 10-18 Hz in one-second payloads, with a fix type `GPSF` and the UTC
+//!   time `GPSU` of each payload): the samples of each payload spread evenly
+//!   over its time, those of a 2-D or 3-D fix kept; every one's 2-D speed as
+//!   `gps_speed_mps`, one fix a second ([`super::timeline::place_gnss`]).
+//!   The distance is the GNSS speed's.
+//! - **Clock**: `t_s` from the first gyro sample; `t0_unix_s` from the first
+//!   payload's `GPSU` (to the payload's second).
+//!
+//! The parser reads the metadata track's samples through the MP4's sample
+//! tables, not the video (peak memory does not grow with the video). It
+//! is a third-party parser of binary formats: a panic inside it is caught
+//! and reported as the file's error, never the app's end.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use telemetry_parser::tags_impl::{GetWithType, GroupId, TagId};
+
+use super::LoadError;
+use super::timeline::{GnssSample, place_gnss};
+use crate::ride::RideLog;
+
+/// Whether `path` looks like a file the camera reader takes: an MP4/MOV
+/// family container (`ftyp` at byte 4) or a telemetry extension.
+pub fn is_camera(path: &Path, head: &[u8]) -> bool {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    (head.len() >= 8 && &head[4..8] == b"ftyp")
+        || matches!(
+            ext.as_deref(),
+            Some("mp4" | "mov" | "insv" | "360" | "lrv" | "bbl" | "bfl")
+        )
+}
+
+/// The four characters of a GoPro key as the parser's unknown tag id.
+const fn key(k: &[u8; 4]) -> TagId {
+    TagId::Unknown(u32::from_be_bytes(*k))
+}
+
+/// Read a camera file as a ride log.
+pub fn read(path: &Path) -> Result<RideLog, LoadError> {
+    let file = path.display().to_string();
+    let bad = |message: String| LoadError::File {
+        file: file.clone(),
+        message,
+    };
+    let mut stream = std::fs::File::open(path).map_err(|error| LoadError::Io {
+        file: file.clone(),
+        error,
+    })?;
+    let size = stream
+        .metadata()
+        .map_err(|error| LoadError::Io {
+            file: file.clone(),
+            error,
+        })?
+        .len() as usize;
+    let parsed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        let input = telemetry_parser::Input::from_stream(
+            &mut stream,
+            size,
+            path,
+            |_| {},
+            Arc::new(AtomicBool::new(false)),
+        )?;
+        let imu = telemetry_parser::util::normalized_imu(&input, None)?;
+        Ok::<_, std::io::Error>((input, imu))
+    }));
+    let (input, imu) = match parsed {
+        Ok(Ok(x)) => x,
+        Ok(Err(e)) => {
+            return Err(bad(format!(
+                "not a camera or telemetry file that telemetry-parser reads: {e}"
+            )));
+        }
+        Err(_) => {
+            return Err(bad(
+                "telemetry-parser failed on this file (it is damaged or of a kind it does not know)"
+                    .into(),
+            ));
+        }
+    };
+    let camera = format!(
+        "{} {}",
+        input.camera_type(),
+        input.camera_model().cloned().unwrap_or_default()
+    )
+    .trim()
+    .to_string();
+    // Rows: gyro samples in time order, the first of any repeated time.
+    let mut rows: Vec<_> = imu
+        .iter()
+        .filter_map(|s| Some((s.timestamp_ms, s.gyro?, s.accl)))
+        .filter(|(t, g, _)| t.is_finite() && g.iter().all(|v| v.is_finite()))
+        .collect();
+    rows.sort_by(|a, b| a.0.total_cmp(&b.0));
+    rows.dedup_by(|b, a| a.0 == b.0);
+    if rows.len() < 2 {
+        return Err(bad(format!(
+            "{camera}: the file has fewer than two gyro samples: a path needs a gyro"
+        )));
+    }
+    let t0_ms = rows[0].0;
+    let n = rows.len();
+    let mut log = RideLog {
+        source: file.clone(),
+        line: (1..=n as u64).collect(),
+        t_s: rows.iter().map(|r| (r.0 - t0_ms) * 1e-3).collect(),
+        gyro_dps: rows.iter().map(|r| r.1).collect(),
+        accel_mps2: rows
+            .iter()
+            .any(|r| r.2.is_some())
+            .then(|| rows.iter().map(|r| r.2).collect()),
+        fix: vec![None; n],
+        metadata: BTreeMap::from([
+            ("source".to_string(), format!("{camera} {file}")),
+            ("gyro_samples".to_string(), "instantaneous".to_string()),
+        ]),
+        ..RideLog::default()
+    };
+    // GNSS: GoPro's GPS5 payloads, one a second.
+    let mut samples = Vec::new();
+    let mut utc_of_first: Option<(f64, f64)> = None;
+    for info in input.samples.iter().flatten() {
+        let Some(gps) = info.tag_map.as_ref().and_then(|m| m.get(&GroupId::GPS)) else {
+            continue;
+        };
+        let data: Option<&Vec<Vec<i32>>> = gps.get_t(TagId::Data);
+        let scale: Option<&Vec<i32>> = gps.get_t(TagId::Scale);
+        let (Some(data), Some(scale)) = (data, scale) else {
+            continue;
+        };
+        let fix: Option<&u32> = gps.get_t(key(b"GPSF"));
+        if fix.is_some_and(|f| *f < 2) || scale.len() < 4 || scale.contains(&0) {
+            continue;
+        }
+        let count = data.len().max(1) as f64;
+        for (i, v) in data.iter().enumerate().filter(|(_, v)| v.len() >= 4) {
+            let t = (info.timestamp_ms + info.duration_ms * i as f64 / count - t0_ms) * 1e-3;
+            let value = |j: usize| v[j] as f64 / scale[j] as f64;
+            samples.push(GnssSample {
+                t,
+                stamp: t,
+                lat: value(0),
+                lon: value(1),
+                alt: Some(value(2)),
+                speed: Some(value(3)),
+                course: None,
+                hacc: None,
+            });
+        }
+        let utc: Option<&u64> = gps.get_t(key(b"GPSU"));
+        if let (None, Some(u)) = (utc_of_first, utc) {
+            utc_of_first = Some((*u as f64 * 1e-3, (info.timestamp_ms - t0_ms) * 1e-3));
+        }
+    }
+    if place_gnss(&mut log, &samples).is_none() {
+        return Err(bad(format!(
+            "{camera}: the file has no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix): a path needs GNSS fixes"
+        )));
+    }
+    if let Some((utc, t)) = utc_of_first {
+        log.metadata
+            .insert("t0_unix_s".into(), format!("{:.3}", utc - t));
+    }
+    Ok(log)
+}
