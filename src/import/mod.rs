@@ -215,6 +215,15 @@ impl Imported {
     }
 }
 
+/// The bytes of the file at `path` and its name for messages.
+pub(crate) fn read_bytes(path: &Path) -> Result<(Vec<u8>, String), LoadError> {
+    let file = path.display().to_string();
+    match std::fs::read(path) {
+        Ok(bytes) => Ok((bytes, file)),
+        Err(error) => Err(LoadError::Io { file, error }),
+    }
+}
+
 /// Tell the kind of `path` by its content, then its name.
 pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadError> {
     if options.map.is_some() {

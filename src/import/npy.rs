@@ -47,11 +47,7 @@ impl Array {
 
 /// Read the array in `path`.
 pub fn read(path: &Path) -> Result<Array, LoadError> {
-    let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (bytes, file) = super::read_bytes(path)?;
     parse(&bytes, &file)
 }
 

@@ -118,11 +118,7 @@ pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
     if super::comma2k19::has_global_pose(path) {
         return super::comma2k19::read_reference(path);
     }
-    let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (bytes, file) = super::read_bytes(path)?;
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());

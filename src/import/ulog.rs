@@ -292,11 +292,7 @@ impl Table<'_> {
 
 /// Read a ULog file as a ride log.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
-    let file = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (bytes, file) = super::read_bytes(path)?;
     parse(&bytes, &file)
 }
 
