@@ -216,3 +216,35 @@ fn walk(dir: &Path) -> Vec<PathBuf> {
     }
     out
 }
+
+/// A folder holding segments is a batch of them (each segment one ride), as
+/// a folder of ride logs is; the segment itself is one ride.
+#[test]
+fn a_folder_of_segments_is_a_batch_and_a_segment_one_ride() {
+    let out = std::env::temp_dir().join(format!("gyropath-segments-{}", std::process::id()));
+    let folder = segment().parent().expect("folder").to_path_buf();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .arg("fit")
+        .arg(&folder)
+        .arg("--out-dir")
+        .arg(&out)
+        .arg("--quiet")
+        .output()
+        .expect("run");
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let written: Vec<String> = std::fs::read_dir(&out)
+        .expect("outputs")
+        .filter_map(|e| e.ok().map(|e| e.file_name().to_string_lossy().into_owned()))
+        .collect();
+    assert!(
+        written
+            .iter()
+            .any(|n| n.starts_with("segment") && n.ends_with(".csv")),
+        "{written:?}"
+    );
+    std::fs::remove_dir_all(&out).expect("clean");
+}

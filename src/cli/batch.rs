@@ -11,8 +11,12 @@ struct BatchRow {
     outcome: Result<FitReport, String>,
 }
 
-/// Every `.csv`, `.bag` and `.mcap` in the given files and folders (folders not
-/// recursed; a rosbag2 folder or a comma2k19 segment is one ride), sorted.
+/// The file types a folder of rides is searched for.
+const RIDE_EXTENSIONS: [&str; 6] = ["csv", "bag", "mcap", "ulg", "mp4", "mov"];
+
+/// Every ride log, bag, ULog and camera file in the given files and folders,
+/// and every rosbag2 folder or comma2k19 segment directly inside them (each
+/// one ride; folders not recursed further), sorted.
 fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     let mut rides = Vec::new();
     for input in inputs {
@@ -21,11 +25,11 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .with_context(|| format!("cannot list {}", input.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| {
-                    p.extension().is_some_and(|x| {
-                        ["csv", "bag", "mcap"]
-                            .iter()
-                            .any(|e| x.eq_ignore_ascii_case(e))
-                    })
+                    gyropath::import::is_ride_folder(p)
+                        || (p.is_file()
+                            && p.extension().is_some_and(|x| {
+                                RIDE_EXTENSIONS.iter().any(|e| x.eq_ignore_ascii_case(e))
+                            }))
                 })
                 .collect();
             found.sort();
@@ -35,7 +39,9 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
         }
     }
     if rides.is_empty() {
-        anyhow::bail!("no ride logs (*.csv, *.bag, *.mcap) found in the given folders");
+        anyhow::bail!(
+            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.mp4, *.mov, rosbag2 folders, comma2k19 segments) found in the given folders"
+        );
     }
     Ok(rides)
 }

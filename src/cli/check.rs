@@ -4,7 +4,8 @@ use super::*;
 
 #[derive(Debug, Args)]
 pub struct CheckArgs {
-    /// The input: ride-log CSV, ROS 1 bag, ROS 2 bag, or a CSV with --map.
+    /// The input: ride-log CSV, ROS 1 bag, ROS 2 bag, comma2k19 segment, PX4
+    /// ULog, camera file (GoPro MP4, ...), or a CSV with --map.
     pub source: PathBuf,
     #[command(flatten)]
     pub options: SourceArgs,
