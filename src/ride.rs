@@ -94,6 +94,13 @@ impl RideLog {
             .map(String::as_str)
     }
 
+    /// Number of GNSS speed samples (0 without the column).
+    pub fn gnss_speed_samples(&self) -> usize {
+        self.gps_speed_mps
+            .as_ref()
+            .map_or(0, |s| s.iter().flatten().count())
+    }
+
     /// Number of GPS fixes.
     pub fn fix_count(&self) -> usize {
         self.fix.iter().filter(|f| f.is_some()).count()

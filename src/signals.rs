@@ -327,8 +327,7 @@ impl Signals {
             ));
         }
 
-        let turning: Vec<f64> = gyro.iter().map(|w| w.norm().to_degrees()).collect();
-        let (distance, odometer) = odometer_distance(log, &turning)?;
+        let (distance, odometer) = odometer_distance(log, |j| gyro[j].norm().to_degrees())?;
         let time = |key: &str, what: &str| -> Result<Option<f64>, SignalError> {
             match log.metadata.get(key).map(|v| v.trim()) {
                 None => Ok(None),
@@ -413,10 +412,7 @@ impl Signals {
             warnings,
             t0_unix_s,
             t0_boot_s,
-            has_gnss_speed: log
-                .gps_speed_mps
-                .as_ref()
-                .is_some_and(|s| s.iter().flatten().count() >= 2),
+            has_gnss_speed: log.gnss_speed_samples() >= 2,
         })
     }
 
@@ -429,32 +425,24 @@ impl Signals {
     }
 }
 
-/// How fast the sensor turns on each row (deg/s, the norm of the rates in
-/// `gyro_dps`): with the GNSS speed, whether a vehicle stands.
-pub fn turn_rates_dps(gyro_dps: &[[f64; 3]]) -> Vec<f64> {
-    gyro_dps
-        .iter()
-        .map(|g| (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt())
-        .collect()
+/// How fast a sensor turns (deg/s, the norm of its rates in deg/s): with
+/// the GNSS speed, whether a vehicle stands.
+pub fn turn_rate_dps(g: &[f64; 3]) -> f64 {
+    (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt()
 }
 
 /// Per-step odometer distance of a log, from whichever odometer it has
 /// (cumulative distance, then speed, then wheel pulses, then the GNSS speed,
-/// which also needs `turn_dps`, the rows' turn rates, to tell a stop), and
-/// which it was.
+/// which also needs `turn_dps`, the turn rate of row `j` in deg/s, to tell
+/// a stop; asked only there, so no other log pays for it), and which it was.
 pub fn odometer_distance(
     log: &RideLog,
-    turn_dps: &[f64],
+    turn_dps: impl Fn(usize) -> f64,
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     if let Some(odo) = &log.odo_m {
         Ok((distance_from_odometer(odo, log)?, Odometer::Cumulative))
     } else if let Some(speed) = &log.speed_mps {
         Ok((distance_from_speed(speed, log)?, Odometer::Speed))
-    } else if let Some(speed) = &log.gps_speed_mps
-        && log.wheel_pulse.is_none()
-    {
-        let (d, kind) = distance_from_gnss_speed(speed, log, turn_dps)?;
-        Ok((d, kind))
     } else if let Some(pulses) = &log.wheel_pulse {
         let c: f64 = log
             .wheel_circumference_m()
@@ -471,6 +459,8 @@ pub fn odometer_distance(
                 revolutions,
             },
         ))
+    } else if let Some(speed) = &log.gps_speed_mps {
+        distance_from_gnss_speed(speed, log, turn_dps)
     } else {
         Err(SignalError::Unusable {
             file: log.source.clone(),
@@ -517,7 +507,7 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 pub fn distance_from_gnss_speed(
     speed: &[Option<f64>],
     log: &RideLog,
-    turn_dps: &[f64],
+    turn_dps: impl Fn(usize) -> f64,
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     let samples: Vec<usize> = (0..speed.len()).filter(|&i| speed[i].is_some()).collect();
     if samples.len() < 2 {
@@ -540,7 +530,7 @@ pub fn distance_from_gnss_speed(
             gaps.push((a, b));
         }
     }
-    let still = |j: usize| turn_dps.get(j).is_some_and(|&w| w < STANDING_RATE_DPS);
+    let still = |j: usize| turn_dps(j) < STANDING_RATE_DPS;
     let mut d = vec![0.0; v.len()];
     let mut standing_s = 0.0;
     for j in 1..v.len() {
@@ -924,7 +914,7 @@ mod attitude_tests {
             })
             .collect();
         log.odo_m = Some(odo);
-        let (d, _) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
+        let (d, _) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
         assert!(d[1] > 0.0 && d[n - 2] < 0.0);
         assert!((d.iter().sum::<f64>() - (1.0 - 0.0001 * ((n - 1) % 2) as f64)).abs() < 1e-9);
         log.odo_m = None;
@@ -933,7 +923,7 @@ mod attitude_tests {
                 .map(|j| Some(if j < n / 2 { 2.0 } else { -1.0 }))
                 .collect(),
         );
-        let (d, kind) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
+        let (d, kind) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
         assert_eq!(kind, Odometer::Speed);
         assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
     }
@@ -967,7 +957,7 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.05, -0.1, 0.2];
         }
-        let (d, kind) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
+        let (d, kind) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
         let Odometer::GnssSpeed {
             samples,
             standing_s,
@@ -995,11 +985,11 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.0, 0.0, 20.0];
         }
-        let (turning, _) = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps)).unwrap();
+        let (turning, _) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
         assert!(turning.iter().sum::<f64>() > total + 0.4);
         // One sample cannot be integrated.
         log.gps_speed_mps = Some((0..n).map(|j| (j == 3).then_some(2.0)).collect());
-        let e = odometer_distance(&log, &turn_rates_dps(&log.gyro_dps))
+        let e = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j]))
             .unwrap_err()
             .to_string();
         assert!(

@@ -313,7 +313,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         return Err(LoadError::File {
             file: path.display().to_string(),
             message: format!(
-                "{what}. A path needs a gyro: a ride log, a bag or a comma2k19 segment"
+                "{what}. A path needs a gyro: a ride log, a bag, a comma2k19 segment, a PX4 ULog or a camera file"
             ),
         });
     }
@@ -372,11 +372,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
 /// Leave out a log's wheel sensor and odometer, so that its distance comes
 /// from the GNSS speed; an error when it has none.
 fn without_odometer(log: &mut RideLog) -> Result<(), LoadError> {
-    let samples = log
-        .gps_speed_mps
-        .as_ref()
-        .map_or(0, |s| s.iter().flatten().count());
-    if samples < 2 {
+    if log.gnss_speed_samples() < 2 {
         return Err(LoadError::File {
             file: log.source.clone(),
             message: "--distance gnss: the log has no GNSS speed (a 'gps_speed_mps' column) to take the distance from".into(),

@@ -376,8 +376,12 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
     let column = |c: &mut Option<Vec<Option<f64>>>| {
         c.get_or_insert_with(|| vec![None; n]);
     };
-    column(&mut log.gps_speed_mps);
-    column(&mut log.gps_course_deg);
+    if samples.iter().any(|s| s.speed.is_some()) {
+        column(&mut log.gps_speed_mps);
+    }
+    if samples.iter().any(|s| s.course.is_some()) {
+        column(&mut log.gps_course_deg);
+    }
     for (s, row) in samples.iter().zip(&rows) {
         let Some(row) = *row else { continue };
         if let (Some(col), Some(v)) = (log.gps_speed_mps.as_mut(), s.speed)

@@ -26,7 +26,7 @@ pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
     let dist =
-        crate::signals::odometer_distance(log, &crate::signals::turn_rates_dps(&log.gyro_dps))
+        crate::signals::odometer_distance(log, |j| crate::signals::turn_rate_dps(&log.gyro_dps[j]))
             .map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
     let mut s = 0.0;
     let mut turn = [0.0; 3];
