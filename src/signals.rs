@@ -29,6 +29,12 @@ pub enum SignalError {
     },
 }
 
+/// The slowest gyro a path is integrated from (Hz, median rate): a vehicle
+/// turns through 90 deg in 2-5 s, so at 5 Hz a turn still spans ten steps
+/// or more; slower logs (a phone's decimated test file logs 0.02 Hz) have
+/// no heading between their samples.
+pub const MIN_GYRO_RATE_HZ: f64 = 5.0;
+
 /// One GPS fix, in the local frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fix {
@@ -293,6 +299,13 @@ impl Signals {
         let mut dt = vec![0.0; n];
         for j in 1..n {
             dt[j] = t[j] - t[j - 1];
+        }
+        let rate = 1.0 / crate::statistics::median(&mut dt[1..].to_vec());
+        if rate < MIN_GYRO_RATE_HZ {
+            return Err(unusable(format!(
+                "the gyro is logged at {rate:.2} Hz ({n} rows over {:.0} s): far too slow to integrate a vehicle's turns, which take a few seconds; a path needs a gyro at {MIN_GYRO_RATE_HZ} Hz or more",
+                t[n - 1] - t[0]
+            )));
         }
         // Same size and alignment: the collect reuses the column's memory.
         let raw: Vec<Vector3<f64>> = gyro_dps

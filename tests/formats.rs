@@ -123,6 +123,75 @@ fn a_px4_ulog_reads_with_its_channels_and_a_standing_vehicle_is_said() {
     assert!(err.contains("a ride without motion"), "{err}");
 }
 
+/// A Pixel 7's GnssLogger log (gnss_lib_py's `pixel6.txt`, MIT), decimated
+/// for unit tests: 10 UncalGyro samples over 509 s and 94 fixes of the GPS
+/// provider. It reads with its channels and clock, and the checks and the
+/// fit both say that a gyro at 0.02 Hz cannot be integrated.
+#[test]
+fn an_android_gnsslogger_log_reads_and_its_sparse_gyro_is_refused() {
+    let txt = formats().join("android_gnsslogger/pixel6.txt");
+    let im = gyropath::import::open(&txt, &ImportOptions::default()).expect("open");
+    assert_eq!(im.kind, gyropath::import::SourceKind::GnssLogger);
+    let log = &im.log;
+    assert_eq!(log.len(), 10);
+    assert!((log.t_s[9] - 508.62).abs() < 0.01, "{}", log.t_s[9]);
+    assert_eq!(log.metadata["t0_boot_s"], "16175.376985");
+    // The first UncalGyro record, rad/s made deg/s.
+    assert!((log.gyro_dps[0][0] - 0.364_839_26f64.to_degrees()).abs() < 1e-9);
+    // 85 of the 94 GPS fixes fall while the gyro runs, about one in 6 s,
+    // but ten rows hold only ten of them, and the reader says so.
+    assert_eq!(log.fix_count(), 10);
+    assert!(
+        log.warnings
+            .iter()
+            .any(|w| w.contains("75 GNSS fix(es) fall nearest")),
+        "{:?}",
+        log.warnings
+    );
+    assert_eq!(
+        log.gps_hacc_m
+            .as_ref()
+            .expect("accuracy")
+            .iter()
+            .flatten()
+            .count(),
+        10
+    );
+    let (lat, lon) = log.fix.iter().flatten().next().copied().expect("fix");
+    assert!((lat - 37.4265).abs() < 0.001 && (lon + 122.1737).abs() < 0.001);
+    let t0: f64 = log.metadata["t0_unix_s"].parse().expect("t0_unix_s");
+    assert!((t0 - 1_699_400_633.3).abs() < 1.0, "{t0}");
+    assert_eq!(
+        log.accel_mps2
+            .as_ref()
+            .expect("accel")
+            .iter()
+            .flatten()
+            .count(),
+        10
+    );
+    let rate = im
+        .check
+        .verdicts
+        .iter()
+        .find(|v| v.subject == "sample rate")
+        .expect("rate verdict");
+    assert_eq!(rate.level, gyropath::import::Level::Problem);
+    assert!(rate.message.contains("0.018 Hz"), "{}", rate.message);
+    assert!(
+        im.check
+            .verdicts
+            .iter()
+            .all(|v| v.subject != "vertical axis"),
+        "no axis verdict from 10 samples: {:?}",
+        im.check.verdicts
+    );
+    let e = gyropath::pipeline::signals(im)
+        .expect_err("too slow")
+        .to_string();
+    assert!(e.contains("0.02 Hz") && e.contains("pixel6.txt"), "{e}");
+}
+
 /// A GoPro MAX's 10 s of hand-held walking (gopro/gpmf-parser's
 /// `max-heromode.mp4`, Apache-2.0 or MIT), read through telemetry-parser:
 /// the gyro at 197.5 Hz, GPS5 at 18 Hz with its 2-D speed, gravity on the

@@ -247,6 +247,11 @@ const ULOG: &str = concat!(
     "/../shared/formats/ulog/sample_log_small.ulg"
 );
 
+const GNSSLOGGER: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/formats/android_gnsslogger/pixel6.txt"
+);
+
 const CAN_SPEED: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../shared/formats/comma2k19-segment/segment/processed_log/CAN/speed/value"
@@ -289,6 +294,27 @@ proptest! {
         let cut = cut % (bytes.len() + 1);
         if let Err(e) = gyropath::import::npy::parse(&bytes[..cut], "fuzz/value") {
             prop_assert!(e.to_string().contains("fuzz/value"), "{}", e);
+        }
+    }
+
+    /// A phone's GnssLogger text cut off or with bytes flipped (a digit
+    /// turned into a letter, a comma into something else): an error naming
+    /// the file, never a panic.
+    #[test]
+    fn damaged_gnsslogger_logs_never_panic(cut in 0usize..400_000, flips in proptest::collection::vec((0usize..400_000, any::<u8>()), 0..8)) {
+        let mut bytes = std::fs::read(GNSSLOGGER).unwrap();
+        for &(at, byte) in &flips {
+            let i = at % bytes.len();
+            bytes[i] ^= byte | 1;
+        }
+        let cut = cut % (bytes.len() + 1);
+        let read = gyropath::import::gnsslogger::parse(&bytes[..cut], "fuzz.txt")
+            .map_err(|e| e.to_string())
+            .and_then(|log| {
+                gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())
+            });
+        if let Err(e) = read {
+            prop_assert!(e.contains("fuzz.txt"), "{}", e);
         }
     }
 }

@@ -12,9 +12,7 @@ struct BatchRow {
 }
 
 /// The file types a folder of rides is searched for.
-const RIDE_EXTENSIONS: [&str; 6] = ["csv", "bag", "mcap", "ulg", "mp4", "mov"];
-
-/// Every ride log, bag, ULog and camera file in the given files and folders,
+/// Every ride log, bag, ULog, camera file and GnssLogger log in the given files and folders,
 /// and every rosbag2 folder or comma2k19 segment directly inside them (each
 /// one ride; folders not recursed further), sorted.
 fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
@@ -25,11 +23,7 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
                 .with_context(|| format!("cannot list {}", input.display()))?
                 .filter_map(|e| e.ok().map(|e| e.path()))
                 .filter(|p| {
-                    gyropath::import::is_ride_folder(p)
-                        || (p.is_file()
-                            && p.extension().is_some_and(|x| {
-                                RIDE_EXTENSIONS.iter().any(|e| x.eq_ignore_ascii_case(e))
-                            }))
+                    gyropath::import::is_ride_folder(p) || gyropath::import::is_ride_file(p)
                 })
                 .collect();
             found.sort();
@@ -40,7 +34,7 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     }
     if rides.is_empty() {
         anyhow::bail!(
-            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.mp4, *.mov, rosbag2 folders, comma2k19 segments) found in the given folders"
+            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.mp4, *.mov, GnssLogger *.txt, rosbag2 folders, comma2k19 segments) found in the given folders"
         );
     }
     Ok(rides)

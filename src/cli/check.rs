@@ -76,7 +76,7 @@ pub fn check(args: &CheckArgs) -> Result<()> {
         write_report(path, &args.source, report)?;
     }
     if report.worst() == Level::Problem && report.recommended.is_none() {
-        anyhow::bail!("the log's axes or units contradict its data, and no mounting undoes it");
+        anyhow::bail!("the checks found a problem (above) that no mounting undoes");
     }
     // What a fit of this input with its defaults would still meet.
     let default_mount = match imported.kind.default_mount() {

@@ -17,6 +17,7 @@
 pub mod camera;
 pub mod checks;
 pub mod comma2k19;
+pub mod gnsslogger;
 pub mod mapped_csv;
 pub mod mount;
 pub mod npy;
@@ -37,6 +38,24 @@ pub use mount::Mount;
 pub use reference::{ReferenceTrack, read_reference};
 pub use ride_csv::{load_file, parse, parse_reader};
 pub use timeline::{TopicChoice, TopicInfo, Topics};
+
+/// The extensions of the files a ride is read from (a `.txt` is a ride
+/// only when it is a GnssLogger log: [`is_ride_file`]).
+pub const RIDE_EXTENSIONS: [&str; 7] = ["csv", "bag", "mcap", "ulg", "mp4", "mov", "txt"];
+
+/// Whether a batch folder's file `path` is a ride, by its extension (and a
+/// `.txt`'s header).
+pub fn is_ride_file(path: &Path) -> bool {
+    let Some(ext) = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+    else {
+        return false;
+    };
+    path.is_file()
+        && RIDE_EXTENSIONS.contains(&ext.as_str())
+        && (ext != "txt" || gnsslogger::is_gnsslogger_file(path))
+}
 
 /// Why an input could not be loaded.
 #[derive(Debug, Error)]
@@ -88,6 +107,8 @@ pub enum SourceKind {
     Ulog,
     /// A camera's telemetry (GoPro MP4 and what telemetry-parser reads).
     Camera,
+    /// An Android phone's GnssLogger text log.
+    GnssLogger,
 }
 
 impl SourceKind {
@@ -100,13 +121,14 @@ impl SourceKind {
             Self::Comma2k19 => "comma2k19 segment",
             Self::Ulog => "PX4 ULog",
             Self::Camera => "camera telemetry",
+            Self::GnssLogger => "Android GnssLogger",
         }
     }
 
     /// Bags carry no mounting, so they are mounted by the checks unless told otherwise.
     pub fn default_mount(self) -> MountChoice {
         match self {
-            Self::Ros1Bag | Self::Ros2Mcap | Self::Camera => MountChoice::Auto,
+            Self::Ros1Bag | Self::Ros2Mcap | Self::Camera | Self::GnssLogger => MountChoice::Auto,
             Self::RideCsv | Self::MappedCsv | Self::Comma2k19 | Self::Ulog => MountChoice::AsLogged,
         }
     }
@@ -235,7 +257,7 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
     if path.is_dir() {
         return Ok(SourceKind::Ros2Mcap);
     }
-    let mut head = [0u8; 13];
+    let mut head = [0u8; 256];
     let n = std::fs::File::open(path)
         .and_then(|mut f| ros1::read_full(&mut f, &mut head))
         .map_err(|error| LoadError::Io {
@@ -255,6 +277,8 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
             SourceKind::Ulog
         } else if camera::is_camera(path, head) {
             SourceKind::Camera
+        } else if gnsslogger::is_gnsslogger(head) {
+            SourceKind::GnssLogger
         } else {
             SourceKind::RideCsv
         },
@@ -313,7 +337,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         return Err(LoadError::File {
             file: path.display().to_string(),
             message: format!(
-                "{what}. A path needs a gyro: a ride log, a bag, a comma2k19 segment, a PX4 ULog or a camera file"
+                "{what}. A path needs a gyro: a ride log, a bag, a comma2k19 segment, a PX4 ULog, a camera file or an Android GnssLogger log"
             ),
         });
     }
@@ -340,6 +364,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         ),
         SourceKind::Ulog => (ulog::read(path)?, None),
         SourceKind::Camera => (camera::read(path)?, None),
+        SourceKind::GnssLogger => (gnsslogger::read(path)?, None),
     };
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;

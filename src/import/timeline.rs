@@ -402,10 +402,15 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
     if chosen.values().any(|&(_, k)| samples[k].hacc.is_some()) {
         column(&mut log.gps_hacc_m);
     }
+    let mut shared = 0;
     for &(_, k) in chosen.values() {
         let (s, Some(row)) = (samples[k], rows[k]) else {
             continue;
         };
+        if log.fix[row].is_some() {
+            shared += 1;
+            continue;
+        }
         log.fix[row] = Some((s.lat, s.lon));
         if let Some(a) = log.gps_alt_m.as_mut() {
             a[row] = s.alt.filter(|v| v.is_finite());
@@ -413,6 +418,12 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
         if let Some(h) = log.gps_hacc_m.as_mut() {
             h[row] = s.hacc.filter(|v| v.is_finite() && *v > 0.0);
         }
+    }
+    if shared > 0 {
+        log.warnings.push(format!(
+            "{}: {shared} GNSS fix(es) fall nearest a gyro row that already holds one (the gyro is logged more sparsely than the fixes); only the first on each row is kept",
+            log.source
+        ));
     }
     chosen.values().next().map(|&(_, k)| samples[k])
 }

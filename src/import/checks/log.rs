@@ -2,26 +2,37 @@
 
 use super::*;
 
-pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) {
+/// Returns whether the gyro is fast enough to integrate at all.
+pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) -> bool {
     let mut dt: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
     let rate = 1.0 / crate::statistics::median(&mut dt);
-    let (level, note) = if rate < 20.0 {
+    let (level, note) = if rate < crate::signals::MIN_GYRO_RATE_HZ {
+        (
+            Level::Problem,
+            format!(
+                ": far too slow to integrate turns; a path needs {} Hz or more",
+                crate::signals::MIN_GYRO_RATE_HZ
+            ),
+        )
+    } else if rate < 20.0 {
         (
             Level::Info,
-            ": a coarse integration step; fast turns are smoothed",
+            ": a coarse integration step; fast turns are smoothed".to_string(),
         )
     } else {
-        (Level::Ok, "")
+        (Level::Ok, String::new())
     };
     report.say(
         "sample rate",
         level,
         format!(
-            "{} rows at {rate:.1} Hz over {:.0} s, time increasing{note}",
+            "{} rows at {rate:.prec$} Hz over {:.0} s, time increasing{note}",
             log.len(),
-            log.t_s[log.len() - 1] - log.t_s[0]
+            log.t_s[log.len() - 1] - log.t_s[0],
+            prec = if rate < 1.0 { 3 } else { 1 },
         ),
     );
+    rate >= crate::signals::MIN_GYRO_RATE_HZ
 }
 
 /// Rows pinned at an axis's extreme: a saturated gyro.

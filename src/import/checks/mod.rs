@@ -185,7 +185,14 @@ pub fn check(log: &RideLog) -> CheckReport {
         report.say("rows", Level::Problem, "fewer than two rows".into());
         return report;
     }
-    sample_rate(log, &mut report);
+    if !sample_rate(log, &mut report) {
+        report.say(
+            "axes and units",
+            Level::Info,
+            "not checked: too few gyro samples to compare with the GPS course or gravity".into(),
+        );
+        return report;
+    }
     saturation(log, &mut report);
     let fixes = summarise(log);
     let accel_up = accelerometer_vertical(log, &mut report);
