@@ -192,6 +192,63 @@ fn an_android_gnsslogger_log_reads_and_its_sparse_gyro_is_refused() {
     assert!(e.contains("0.02 Hz") && e.contains("pixel6.txt"), "{e}");
 }
 
+/// An ArduCopter 4.6.2 log on a Pixhawk 4 (ArduPilot/MethodicConfigurator's
+/// `backend_log_80k.bin`, GPL-3.0-or-later, cut to 80 KiB): 0.4 s of
+/// sensor data after the parameters. IMU instance 0 at about 25 Hz as
+/// logged, gravity on +z once made z up, two GPS records with their GPA
+/// accuracy in Braunschweig; too short for a path, and the fit says why.
+#[test]
+fn an_ardupilot_dataflash_log_reads_with_its_channels() {
+    let bin = formats().join("ardupilot_dataflash/backend_log_80k.bin");
+    let im = gyropath::import::open(&bin, &ImportOptions::default()).expect("open");
+    assert_eq!(im.kind, gyropath::import::SourceKind::DataFlash);
+    let log = &im.log;
+    assert_eq!(log.len(), 10);
+    let rate = (log.len() - 1) as f64 / log.t_s[log.len() - 1];
+    assert!((23.0..27.0).contains(&rate), "{rate} Hz");
+    assert_eq!(log.metadata["t0_boot_s"], "140.209868");
+    // The first IMU record: GyrX 0.0053447 rad/s, GyrY -0.0032336 (made left).
+    assert!((log.gyro_dps[0][0] - 0.005_344_705f64.to_degrees()).abs() < 1e-6);
+    assert!((log.gyro_dps[0][1] - 0.003_233_568f64.to_degrees()).abs() < 1e-6);
+    assert_eq!(log.fix_count(), 1);
+    assert_eq!(log.gnss_speed_samples(), 2);
+    let (lat, lon) = log.fix.iter().flatten().next().copied().expect("fix");
+    assert!((lat - 52.455_636_3).abs() < 1e-9 && (lon - 10.558_581_5).abs() < 1e-9);
+    assert_eq!(
+        log.gps_hacc_m
+            .as_ref()
+            .expect("GPA HAcc")
+            .iter()
+            .flatten()
+            .next(),
+        Some(&0.9)
+    );
+    assert_eq!(
+        log.gps_alt_m.as_ref().expect("Alt").iter().flatten().next(),
+        Some(&47.77)
+    );
+    // GPS week 2382, 219552.2 s: 2 September 2025, 12:58:54 UTC.
+    let t0: f64 = log.metadata["t0_unix_s"].parse().expect("t0_unix_s");
+    assert!((t0 - 1_756_817_934.185).abs() < 0.01, "{t0}");
+    let verdict = |subject: &str| {
+        im.check
+            .verdicts
+            .iter()
+            .rev()
+            .find(|v| v.subject == subject)
+            .unwrap_or_else(|| panic!("no verdict on {subject}: {:?}", im.check.verdicts))
+    };
+    assert!(verdict("vertical axis").message.contains("+z points up"));
+    assert!(verdict("accelerometer units").message.contains("gravity"));
+    let e = gyropath::pipeline::signals(im)
+        .expect_err("one fix")
+        .to_string();
+    assert!(
+        e.contains("1 GPS fix") && e.contains("backend_log_80k.bin"),
+        "{e}"
+    );
+}
+
 /// A GoPro MAX's 10 s of hand-held walking (gopro/gpmf-parser's
 /// `max-heromode.mp4`, Apache-2.0 or MIT), read through telemetry-parser:
 /// the gyro at 197.5 Hz, GPS5 at 18 Hz with its 2-D speed, gravity on the

@@ -252,6 +252,11 @@ const GNSSLOGGER: &str = concat!(
     "/../shared/formats/android_gnsslogger/pixel6.txt"
 );
 
+const DATAFLASH: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/formats/ardupilot_dataflash/backend_log_80k.bin"
+);
+
 const CAN_SPEED: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../shared/formats/comma2k19-segment/segment/processed_log/CAN/speed/value"
@@ -315,6 +320,27 @@ proptest! {
             });
         if let Err(e) = read {
             prop_assert!(e.contains("fuzz.txt"), "{}", e);
+        }
+    }
+
+    /// An ArduPilot log cut off or with bytes flipped (in its FMT records
+    /// too, which the parser trusts for every message's length): an error
+    /// naming the file, never a panic.
+    #[test]
+    fn damaged_dataflash_logs_never_panic(cut in 0usize..90_000, flips in proptest::collection::vec((0usize..90_000, any::<u8>()), 0..8)) {
+        let mut bytes = std::fs::read(DATAFLASH).unwrap();
+        for &(at, byte) in &flips {
+            let i = at % bytes.len();
+            bytes[i] ^= byte | 1;
+        }
+        let cut = cut % (bytes.len() + 1);
+        let read = gyropath::import::dataflash::parse(&bytes[..cut], "fuzz.bin")
+            .map_err(|e| e.to_string())
+            .and_then(|log| {
+                gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())
+            });
+        if let Err(e) = read {
+            prop_assert!(e.contains("fuzz.bin"), "{}", e);
         }
     }
 }

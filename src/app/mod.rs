@@ -387,13 +387,14 @@ impl GyropathApp {
                 spawn_dialog(move || {
                     if let Some(p) = rfd::FileDialog::new()
                         .add_filter(
-                            "ride log, bag, ULog, camera or phone log",
+                            "ride log, bag, drone, camera or phone log",
                             &crate::import::RIDE_EXTENSIONS,
                         )
                         .add_filter("ride-log CSV", &["csv"])
                         .add_filter("ROS 1 bag", &["bag"])
                         .add_filter("ROS 2 bag (MCAP)", &["mcap"])
                         .add_filter("PX4 ULog", &["ulg"])
+                        .add_filter("ArduPilot DataFlash", &["bin"])
                         .add_filter("camera (GoPro MP4, ...)", &["mp4", "mov"])
                         .add_filter("Android GnssLogger", &["txt"])
                         .pick_file()

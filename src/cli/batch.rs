@@ -12,7 +12,7 @@ struct BatchRow {
 }
 
 /// The file types a folder of rides is searched for.
-/// Every ride log, bag, ULog, camera file and GnssLogger log in the given files and folders,
+/// Every ride log, bag, ULog, DataFlash, camera and GnssLogger log in the given files and folders,
 /// and every rosbag2 folder or comma2k19 segment directly inside them (each
 /// one ride; folders not recursed further), sorted.
 fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
@@ -34,7 +34,7 @@ fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
     }
     if rides.is_empty() {
         anyhow::bail!(
-            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.mp4, *.mov, GnssLogger *.txt, rosbag2 folders, comma2k19 segments) found in the given folders"
+            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.bin, *.mp4, *.mov, GnssLogger *.txt, rosbag2 folders, comma2k19 segments) found in the given folders"
         );
     }
     Ok(rides)

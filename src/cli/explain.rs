@@ -9,7 +9,7 @@ use super::*;
 #[derive(Debug, Args)]
 pub struct ExplainArgs {
     /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder),
-    /// comma2k19 segment, PX4 ULog, camera file (GoPro MP4, ...), or a CSV with --map.
+    /// comma2k19 segment, PX4 ULog or ArduPilot .bin, camera file (GoPro MP4, ...), Android GnssLogger .txt, or a CSV with --map.
     pub ride: PathBuf,
     #[command(flatten)]
     pub source: SourceArgs,

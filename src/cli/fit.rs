@@ -6,7 +6,7 @@ use super::*;
 #[derive(Debug, Args)]
 pub struct FitArgs {
     /// Ride log(s) (CSV, see the ride-log format), bags, comma2k19 segments,
-    /// PX4 ULogs, camera files (GoPro MP4, ...), or folders of them: more
+    /// PX4 ULogs, ArduPilot .bin logs, camera files (GoPro MP4, ...), GnssLogger .txt logs, or folders of them: more
     /// than one, a folder, or --out-dir fits them all in parallel (batch mode).
     #[arg(required = true, num_args = 1..)]
     pub rides: Vec<PathBuf>,

@@ -5,7 +5,7 @@ use super::*;
 #[derive(Debug, Args)]
 pub struct ImportArgs {
     /// The input: ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder), comma2k19
-    /// segment, PX4 ULog, camera file (GoPro MP4, ...), ride-log CSV, or a CSV with --map.
+    /// segment, PX4 ULog or ArduPilot .bin, camera file (GoPro MP4, ...), Android GnssLogger .txt, ride-log CSV, or a CSV with --map.
     pub source: PathBuf,
     #[command(flatten)]
     pub options: SourceArgs,

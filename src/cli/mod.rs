@@ -81,7 +81,7 @@ pub enum Command {
     ///
     /// Example: `gyropath open ride.csv`, `gyropath open test1.bag --mount auto`.
     Open(OpenArgs),
-    /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder), a comma2k19 segment, a PX4 ULog, a camera file (GoPro MP4, ...) or a mapped CSV to a ride-log CSV.
+    /// Convert a ROS 1 bag, a ROS 2 bag (MCAP or rosbag2 folder), a comma2k19 segment, a PX4 ULog, an ArduPilot .bin, a camera file (GoPro MP4, ...), an Android GnssLogger .txt or a mapped CSV to a ride-log CSV.
     ///
     /// Example: `gyropath import test1.bag --out ride.csv`;
     /// `gyropath import logger.csv --map logger.toml --out ride.csv`.
@@ -98,7 +98,7 @@ pub enum Command {
 #[derive(Debug, Args)]
 pub struct OpenArgs {
     /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder),
-    /// comma2k19 segment, PX4 ULog, camera file (GoPro MP4, ...), or a CSV
+    /// comma2k19 segment, PX4 ULog or ArduPilot .bin, camera file (GoPro MP4, ...), Android GnssLogger .txt, or a CSV
     /// with --map; none: the bundled sample ride.
     pub ride: Option<PathBuf>,
     #[command(flatten)]

@@ -17,6 +17,7 @@
 pub mod camera;
 pub mod checks;
 pub mod comma2k19;
+pub mod dataflash;
 pub mod gnsslogger;
 pub mod mapped_csv;
 pub mod mount;
@@ -41,7 +42,7 @@ pub use timeline::{TopicChoice, TopicInfo, Topics};
 
 /// The extensions of the files a ride is read from (a `.txt` is a ride
 /// only when it is a GnssLogger log: [`is_ride_file`]).
-pub const RIDE_EXTENSIONS: [&str; 7] = ["csv", "bag", "mcap", "ulg", "mp4", "mov", "txt"];
+pub const RIDE_EXTENSIONS: [&str; 8] = ["csv", "bag", "mcap", "ulg", "bin", "mp4", "mov", "txt"];
 
 /// Whether a batch folder's file `path` is a ride, by its extension (and a
 /// `.txt`'s header).
@@ -109,6 +110,8 @@ pub enum SourceKind {
     Camera,
     /// An Android phone's GnssLogger text log.
     GnssLogger,
+    /// An ArduPilot DataFlash log (`.bin`).
+    DataFlash,
 }
 
 impl SourceKind {
@@ -122,6 +125,7 @@ impl SourceKind {
             Self::Ulog => "PX4 ULog",
             Self::Camera => "camera telemetry",
             Self::GnssLogger => "Android GnssLogger",
+            Self::DataFlash => "ArduPilot DataFlash",
         }
     }
 
@@ -129,7 +133,9 @@ impl SourceKind {
     pub fn default_mount(self) -> MountChoice {
         match self {
             Self::Ros1Bag | Self::Ros2Mcap | Self::Camera | Self::GnssLogger => MountChoice::Auto,
-            Self::RideCsv | Self::MappedCsv | Self::Comma2k19 | Self::Ulog => MountChoice::AsLogged,
+            Self::RideCsv | Self::MappedCsv | Self::Comma2k19 | Self::Ulog | Self::DataFlash => {
+                MountChoice::AsLogged
+            }
         }
     }
 }
@@ -275,6 +281,8 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
             SourceKind::Ros2Mcap
         } else if head.starts_with(ulog::MAGIC) || ext.as_deref() == Some("ulg") {
             SourceKind::Ulog
+        } else if head.starts_with(dataflash::MAGIC) || ext.as_deref() == Some("bin") {
+            SourceKind::DataFlash
         } else if camera::is_camera(path, head) {
             SourceKind::Camera
         } else if gnsslogger::is_gnsslogger(head) {
@@ -337,7 +345,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         return Err(LoadError::File {
             file: path.display().to_string(),
             message: format!(
-                "{what}. A path needs a gyro: a ride log, a bag, a comma2k19 segment, a PX4 ULog, a camera file or an Android GnssLogger log"
+                "{what}. A path needs a gyro: a ride log, a bag, a comma2k19 segment, a PX4 ULog or ArduPilot log, a camera file or an Android GnssLogger log"
             ),
         });
     }
@@ -365,6 +373,7 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         SourceKind::Ulog => (ulog::read(path)?, None),
         SourceKind::Camera => (camera::read(path)?, None),
         SourceKind::GnssLogger => (gnsslogger::read(path)?, None),
+        SourceKind::DataFlash => (dataflash::read(path)?, None),
     };
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;
