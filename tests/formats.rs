@@ -35,15 +35,56 @@ fn gnss_only_files_say_what_they_are_and_that_a_path_needs_a_gyro() {
     assert!(e.starts_with(&nmea.display().to_string()), "{e}");
     assert!(e.contains("NMEA 0183 of") && e.contains("no gyro"), "{e}");
 
-    for fit in [
-        "Edge810-Vector-2013-08-16-15-35-10.fit",
-        "elemnt-bolt-no-application-id-inside-developer-data-id.fit",
+    for (fit, what) in [
+        (
+            "Edge810-Vector-2013-08-16-15-35-10.fit",
+            "(edge810) of 4700 points over 4699 s, 41.3 km, with a wheel-speed sensor paired",
+        ),
+        (
+            "elemnt-bolt-no-application-id-inside-developer-data-id.fit",
+            "(ELEMNT BOLT) of 131 points over 130 s, 1.0 km, with a wheel-speed sensor paired",
+        ),
     ] {
         let e = open_err(&formats().join("fit").join(fit));
         assert!(
-            e.contains("a Garmin FIT activity") && e.contains("A path needs a gyro"),
+            e.contains(&format!("a Garmin FIT activity {what}"))
+                && e.contains("A path needs a gyro"),
             "{e}"
         );
+        assert!(e.contains("--reference"), "{e}");
+    }
+}
+
+/// A FIT activity is a reference track in UTC, as a GPX track is: the
+/// Edge 810's first point in St. John's, Newfoundland, on 16 August 2013,
+/// 18:05:10 UTC.
+#[test]
+fn a_fit_activity_reads_as_a_reference_track() {
+    let fit = formats().join("fit/Edge810-Vector-2013-08-16-15-35-10.fit");
+    let track = gyropath::import::read_reference(&fit).expect("reference");
+    assert_eq!(track.clock, gyropath::import::reference::Clock::Unix);
+    assert_eq!(track.t_s.len(), 4700);
+    assert_eq!(track.t_s[0], 1_376_676_310.0);
+    assert!(track.has_alt);
+    let p = track.points[0];
+    assert!(
+        (p.lat_deg - 47.626).abs() < 0.01 && (p.lon_deg + 52.81).abs() < 0.01,
+        "{p:?}"
+    );
+    assert!((p.alt_m - 132.2).abs() < 0.01);
+    // Cut short or damaged: an error naming the file, never a panic.
+    let bytes = std::fs::read(&fit).expect("read");
+    for n in [0, 11, 14, 1000, bytes.len() / 2] {
+        if let Err(e) = gyropath::import::fit::parse(&bytes[..n], "cut.fit") {
+            assert!(e.to_string().starts_with("cut.fit: "), "{e}");
+        }
+    }
+    let mut flipped = bytes.clone();
+    for at in (20..flipped.len()).step_by(997) {
+        flipped[at] ^= 0x5a;
+    }
+    if let Err(e) = gyropath::import::fit::parse(&flipped, "flipped.fit") {
+        assert!(e.to_string().starts_with("flipped.fit: "), "{e}");
     }
 }
 

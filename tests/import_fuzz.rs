@@ -257,6 +257,11 @@ const DATAFLASH: &str = concat!(
     "/../shared/formats/ardupilot_dataflash/backend_log_80k.bin"
 );
 
+const FIT: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/formats/fit/elemnt-bolt-no-application-id-inside-developer-data-id.fit"
+);
+
 const CAN_SPEED: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
     "/../shared/formats/comma2k19-segment/segment/processed_log/CAN/speed/value"
@@ -341,6 +346,21 @@ proptest! {
             });
         if let Err(e) = read {
             prop_assert!(e.contains("fuzz.bin"), "{}", e);
+        }
+    }
+
+    /// A FIT activity cut off or with bytes flipped, read as a reference
+    /// track: an error naming the file, never a panic.
+    #[test]
+    fn damaged_fit_files_never_panic(cut in 0usize..6_000, flips in proptest::collection::vec((0usize..6_000, any::<u8>()), 0..8)) {
+        let mut bytes = std::fs::read(FIT).unwrap();
+        for &(at, byte) in &flips {
+            let i = at % bytes.len();
+            bytes[i] ^= byte | 1;
+        }
+        let cut = cut % (bytes.len() + 1);
+        if let Err(e) = gyropath::import::fit::parse(&bytes[..cut], "fuzz.fit") {
+            prop_assert!(e.to_string().contains("fuzz.fit"), "{}", e);
         }
     }
 }

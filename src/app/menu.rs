@@ -8,8 +8,8 @@ impl GyropathApp {
         let dropped = ui.ctx().input(|i| i.raw.dropped_files.clone());
         if let Some(f) = dropped.into_iter().next() {
             let path = f.path().to_path_buf();
-            // A CSV with times and positions but no gyro is a reference track
-            // of the ride already open, not a ride.
+            // A track without a gyro (a CSV of times and positions, GPX,
+            // FIT, NMEA) is a reference track of the ride already open.
             if self.ride.is_some() && is_reference_track(&path) {
                 commands.push(Command::OpenReference(path));
             } else {
@@ -117,6 +117,13 @@ fn is_reference_track(path: &std::path::Path) -> bool {
     // itself is a ride).
     if path.is_dir() {
         return is_pose_folder(path);
+    }
+    // GNSS-only formats: never a ride, so a reference track.
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if matches!(ext.as_deref(), Some("gpx" | "fit" | "gga" | "nmea")) {
+        return true;
     }
     let Ok(file) = std::fs::File::open(path) else {
         return false;

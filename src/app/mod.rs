@@ -436,8 +436,8 @@ impl GyropathApp {
                 spawn_dialog(move || {
                     if let Some(p) = rfd::FileDialog::new()
                         .add_filter(
-                            "reference track (t_s,lat_deg,lon_deg[,alt_m] CSV, GPX, NMEA; a comma2k19 global_pose folder: drop it on the window)",
-                            &["csv", "gpx", "gga", "nmea"],
+                            "reference track (t_s,lat_deg,lon_deg[,alt_m] CSV, GPX, Garmin FIT, NMEA; a comma2k19 global_pose folder: drop it on the window)",
+                            &["csv", "gpx", "fit", "gga", "nmea"],
                         )
                         .pick_file()
                     {

@@ -18,6 +18,7 @@ pub mod camera;
 pub mod checks;
 pub mod comma2k19;
 pub mod dataflash;
+pub mod fit;
 pub mod gnsslogger;
 pub mod mapped_csv;
 pub mod mount;
@@ -304,10 +305,18 @@ fn gnss_only(path: &Path) -> Option<String> {
     let head = &head[..n];
     let text = String::from_utf8_lossy(head);
     let trimmed = text.trim_start_matches('\u{feff}').trim_start();
-    if head.len() >= 12 && &head[8..12] == b".FIT" {
-        return Some(
-            "a Garmin FIT activity: GNSS positions and speeds from a bike computer or watch, no gyro; gyropath does not read FIT files yet (export the activity as GPX to use it as a reference track)".into(),
-        );
+    if fit::is_fit(head) {
+        let bytes = std::fs::read(path).ok()?;
+        return Some(match fit::parse(&bytes, &path.display().to_string()) {
+            Ok(a) => format!(
+                "{}: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track)",
+                a.describe(),
+                path.display()
+            ),
+            Err(e) => format!(
+                "a Garmin FIT file: GNSS only, no gyro, and not readable as a reference track either: {e}"
+            ),
+        });
     }
     let parse: fn(&[u8], &str) -> Result<ReferenceTrack, LoadError> =
         if trimmed.starts_with("<?xml") || trimmed.starts_with("<gpx") {

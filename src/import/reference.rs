@@ -5,7 +5,8 @@
 //! `truth.csv` of the shared real drives and of `gyropath simulate --truth`),
 //! from a GPX track (`.gpx`: every track point with its `<time>`, `<ele>`
 //! when given) or from NMEA 0183 (`.gga`, `.nmea`: the GGA sentences of a
-//! fix, dated by the RMC sentences), the last two in UTC: they are put on the
+//! fix, dated by the RMC sentences) or from a Garmin FIT activity
+//! ([`super::fit`]), the last three in UTC: they are put on the
 //! ride's clock by its `t0_unix_s` ([`ReferenceTrack::on_ride_clock`]), or
 //! from a comma2k19 segment's `global_pose` (its folder or the segment's),
 //! on the device's boot clock ([`super::comma2k19::read_reference`]).
@@ -122,6 +123,9 @@ pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
     let extension = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if extension.as_deref() == Some("fit") || super::fit::is_fit(&bytes) {
+        return Ok(super::fit::parse(&bytes, &file)?.track);
+    }
     match extension.as_deref() {
         Some("gpx") => parse_gpx(&bytes, &file),
         Some("gga" | "nmea") => parse_nmea(&bytes, &file),
