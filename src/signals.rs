@@ -30,10 +30,11 @@ pub enum SignalError {
 }
 
 /// The slowest gyro a path is integrated from (Hz, median rate): a vehicle
-/// turns through 90 deg in 2-5 s, so at 5 Hz a turn still spans ten steps
-/// or more; slower logs (a phone's decimated test file logs 0.02 Hz) have
-/// no heading between their samples.
-pub const MIN_GYRO_RATE_HZ: f64 = 5.0;
+/// turns through 90 deg in 2-5 s, so at 2 Hz a turn still spans four steps
+/// or more (the smartLoc car's yaw-rate sensor logs 5 Hz and fits well);
+/// slower logs (a phone's decimated test file logs 0.02 Hz) have no heading
+/// between their samples.
+pub const MIN_GYRO_RATE_HZ: f64 = 2.0;
 
 /// One GPS fix, in the local frame.
 #[derive(Clone, Debug, PartialEq)]

@@ -267,9 +267,23 @@ const CAN_SPEED: &str = concat!(
     "/../shared/formats/comma2k19-segment/segment/processed_log/CAN/speed/value"
 );
 
-/// A ULog's bytes read as a ride and turned into signals: the error, if any.
-fn read_ulog(bytes: &[u8]) -> Result<usize, String> {
-    let log = gyropath::import::ulog::parse(bytes, "fuzz.ulg").map_err(|e| e.to_string())?;
+/// The file at `path` with bytes flipped (`byte | 1`, so each one changes)
+/// and cut short at `cut` (modulo its length + 1).
+fn damaged(path: &str, cut: usize, flips: &[(usize, u8)]) -> Vec<u8> {
+    let mut bytes = std::fs::read(path).unwrap();
+    for &(at, byte) in flips {
+        let i = at % bytes.len();
+        bytes[i] ^= byte | 1;
+    }
+    bytes.truncate(cut % (bytes.len() + 1));
+    bytes
+}
+
+/// A reader's ride log turned into signals: its row count, or the error.
+fn to_signals(
+    read: Result<gyropath::import::RideLog, gyropath::import::LoadError>,
+) -> Result<usize, String> {
+    let log = read.map_err(|e| e.to_string())?;
     let n = log.len();
     gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())?;
     Ok(n)
@@ -282,13 +296,8 @@ proptest! {
     /// naming the file or the part before the damage, never a panic.
     #[test]
     fn damaged_ulogs_never_panic(cut in 0usize..1_000_000, flips in proptest::collection::vec((0usize..1_000_000, any::<u8>()), 0..8)) {
-        let mut bytes = std::fs::read(ULOG).unwrap();
-        for &(at, byte) in &flips {
-            let i = at % bytes.len();
-            bytes[i] ^= byte | 1;
-        }
-        let cut = cut % (bytes.len() + 1);
-        if let Err(e) = read_ulog(&bytes[..cut]) {
+        let bytes = damaged(ULOG, cut, &flips);
+        if let Err(e) = to_signals(gyropath::import::ulog::parse(&bytes, "fuzz.ulg")) {
             prop_assert!(e.contains("fuzz.ulg"), "{}", e);
         }
     }
@@ -296,13 +305,8 @@ proptest! {
     /// A comma2k19 array cut off or damaged: an error naming it, never a panic.
     #[test]
     fn damaged_numpy_arrays_never_panic(cut in 0usize..100_000, flips in proptest::collection::vec((0usize..100_000, any::<u8>()), 0..4)) {
-        let mut bytes = std::fs::read(CAN_SPEED).unwrap();
-        for &(at, byte) in &flips {
-            let i = at % bytes.len();
-            bytes[i] ^= byte | 1;
-        }
-        let cut = cut % (bytes.len() + 1);
-        if let Err(e) = gyropath::import::npy::parse(&bytes[..cut], "fuzz/value") {
+        let bytes = damaged(CAN_SPEED, cut, &flips);
+        if let Err(e) = gyropath::import::npy::parse(&bytes, "fuzz/value") {
             prop_assert!(e.to_string().contains("fuzz/value"), "{}", e);
         }
     }
@@ -312,18 +316,8 @@ proptest! {
     /// the file, never a panic.
     #[test]
     fn damaged_gnsslogger_logs_never_panic(cut in 0usize..400_000, flips in proptest::collection::vec((0usize..400_000, any::<u8>()), 0..8)) {
-        let mut bytes = std::fs::read(GNSSLOGGER).unwrap();
-        for &(at, byte) in &flips {
-            let i = at % bytes.len();
-            bytes[i] ^= byte | 1;
-        }
-        let cut = cut % (bytes.len() + 1);
-        let read = gyropath::import::gnsslogger::parse(&bytes[..cut], "fuzz.txt")
-            .map_err(|e| e.to_string())
-            .and_then(|log| {
-                gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())
-            });
-        if let Err(e) = read {
+        let bytes = damaged(GNSSLOGGER, cut, &flips);
+        if let Err(e) = to_signals(gyropath::import::gnsslogger::parse(&bytes[..], "fuzz.txt")) {
             prop_assert!(e.contains("fuzz.txt"), "{}", e);
         }
     }
@@ -333,18 +327,8 @@ proptest! {
     /// naming the file, never a panic.
     #[test]
     fn damaged_dataflash_logs_never_panic(cut in 0usize..90_000, flips in proptest::collection::vec((0usize..90_000, any::<u8>()), 0..8)) {
-        let mut bytes = std::fs::read(DATAFLASH).unwrap();
-        for &(at, byte) in &flips {
-            let i = at % bytes.len();
-            bytes[i] ^= byte | 1;
-        }
-        let cut = cut % (bytes.len() + 1);
-        let read = gyropath::import::dataflash::parse(&bytes[..cut], "fuzz.bin")
-            .map_err(|e| e.to_string())
-            .and_then(|log| {
-                gyropath::signals::Signals::from_owned_log(log).map_err(|e| e.to_string())
-            });
-        if let Err(e) = read {
+        let bytes = damaged(DATAFLASH, cut, &flips);
+        if let Err(e) = to_signals(gyropath::import::dataflash::parse(&bytes[..], "fuzz.bin")) {
             prop_assert!(e.contains("fuzz.bin"), "{}", e);
         }
     }
@@ -353,13 +337,8 @@ proptest! {
     /// track: an error naming the file, never a panic.
     #[test]
     fn damaged_fit_files_never_panic(cut in 0usize..6_000, flips in proptest::collection::vec((0usize..6_000, any::<u8>()), 0..8)) {
-        let mut bytes = std::fs::read(FIT).unwrap();
-        for &(at, byte) in &flips {
-            let i = at % bytes.len();
-            bytes[i] ^= byte | 1;
-        }
-        let cut = cut % (bytes.len() + 1);
-        if let Err(e) = gyropath::import::fit::parse(&bytes[..cut], "fuzz.fit") {
+        let bytes = damaged(FIT, cut, &flips);
+        if let Err(e) = gyropath::import::fit::parse(&bytes, "fuzz.fit") {
             prop_assert!(e.to_string().contains("fuzz.fit"), "{}", e);
         }
     }

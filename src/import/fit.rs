@@ -88,13 +88,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
             ));
         }
     };
-    let mut track = ReferenceTrack {
-        source: file.to_string(),
-        t_s: Vec::new(),
-        points: Vec::new(),
-        has_alt: false,
-        clock: Clock::Unix,
-    };
+    let mut track = ReferenceTrack::empty(file, Clock::Unix);
     let mut distance_m = None;
     let mut wheel_sensor = false;
     let mut device = None;

@@ -51,6 +51,17 @@ pub enum Clock {
 }
 
 impl ReferenceTrack {
+    /// A track with no points yet, from `source`, on `clock`.
+    pub fn empty(source: &str, clock: Clock) -> Self {
+        Self {
+            source: source.to_string(),
+            t_s: Vec::new(),
+            points: Vec::new(),
+            has_alt: false,
+            clock,
+        }
+    }
+
     /// The track on the clock of a ride whose `t_s = 0` is `t0_unix_s`
     /// (`t_ride = t_unix - t0_unix_s`; a boot-clock track: `t0_boot_s`); a
     /// track already on the ride's clock as it is. A UTC track and a ride
@@ -143,13 +154,7 @@ pub fn parse_gpx(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError> 
         message,
     };
     let doc = gpx::read(bytes).map_err(|e| whole(format!("not a GPX file: {e}")))?;
-    let mut track = ReferenceTrack {
-        source: file.to_string(),
-        t_s: Vec::new(),
-        points: Vec::new(),
-        has_alt: false,
-        clock: Clock::Unix,
-    };
+    let mut track = ReferenceTrack::empty(file, Clock::Unix);
     let points = doc
         .tracks
         .iter()
