@@ -12,11 +12,11 @@ impl GyropathApp {
         let mut changed = false;
         ui.heading("Effects");
         ui.label("The paper's model is always on; add effects it lacks:");
-        let channels = self
+        let offered = self
             .ride
             .as_ref()
-            .map_or(Vec::new(), |r| r.channels.clone());
-        for (id, about) in effects::catalogue(&channels) {
+            .map_or_else(|| effects::catalogue(&[]), |r| r.offered_effects.clone());
+        for (id, about) in offered {
             let mut on = effects_contains(&fit.model.effects, &id);
             if ui.checkbox(&mut on, &id).on_hover_text(about).changed() {
                 set_effect(&mut fit.model.effects, &id, on);

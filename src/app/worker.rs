@@ -112,8 +112,8 @@ pub struct RideView {
     pub fixes: Vec<[f64; 3]>,
     /// GPS outages (log time from, to): gaps between fixes longer than 2.5 s.
     pub outages: Vec<(f64, f64)>,
-    /// Extra channels of the log (for the effect catalogue).
-    pub channels: Vec<String>,
+    /// The effects of the catalogue this ride can take, with what each models.
+    pub offered_effects: Vec<(String, String)>,
     pub warnings: Vec<String>,
     /// What the ride was read from, and what the checks said.
     pub origin: Origin,
@@ -654,7 +654,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         t0: t_first,
         fixes,
         outages: crate::diagnosis::view::outages(sig),
-        channels: sig.channels.iter().map(|(n, _)| n.clone()).collect(),
+        offered_effects: crate::effects::offered(sig),
         warnings: sig.warnings.clone(),
         origin,
         attitude: sig.attitude.clone(),

@@ -6,7 +6,7 @@
 //! | site | what the effect maps | used by |
 //! | --- | --- | --- |
 //! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments`, `gyro_bias_channel:<c>`, `gyro_scale` |
-//! | distance | odometer distance `d_j` of step `j` -> corrected distance | `odometer_gain` |
+//! | distance | odometer distance `d_j` of step `j` -> corrected distance | `speed_lag`, `odometer_gain` |
 //! | forward axis | the vehicle's forward axis in sensor axes, `dir_t = q_t f` | `mount_misalignment` |
 //! | start | initial orientation and position | `initial_orientation`, `initial_position` |
 //! | observation time | the instant a fix refers to (`t - lag`, path interpolated) | `gps_lag` |
@@ -35,6 +35,7 @@ mod initial_orientation;
 mod initial_position;
 pub mod mount_misalignment;
 mod odometer_gain;
+mod speed_lag;
 
 pub use baro_drift::BaroDrift;
 pub use baro_offset::BaroOffset;
@@ -49,6 +50,7 @@ pub use initial_orientation::InitialOrientation;
 pub use initial_position::InitialPosition;
 pub use mount_misalignment::MountMisalignment;
 pub use odometer_gain::OdometerGain;
+pub use speed_lag::SpeedLag;
 
 pub use crate::contract::{
     Columns, DistancePartials, Effect, GyroPartials, ParamInfo, PriorRows, Role, TargetSite,
@@ -107,9 +109,10 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
 }
 
 /// All ids in registry order (the order effects are chained in).
-pub const REGISTRY: [&str; 12] = [
+pub const REGISTRY: [&str; 13] = [
     "initial_position",
     "initial_orientation",
+    "speed_lag",
     "odometer_gain",
     "gyro_bias",
     "gyro_bias_segments",
@@ -139,11 +142,26 @@ pub fn catalogue(channels: &[String]) -> Vec<(String, String)> {
     out
 }
 
+/// The catalogue's effects that `signals` can take: `speed_lag` only where
+/// the distance is the GNSS speed's, the barometer's only with a barometer
+/// (what the app's Effects panel lists).
+pub fn offered(signals: &Signals) -> Vec<(String, String)> {
+    let channels: Vec<String> = signals.channels.iter().map(|(n, _)| n.clone()).collect();
+    catalogue(&channels)
+        .into_iter()
+        .filter(|(id, _)| match id.as_str() {
+            "speed_lag" => matches!(signals.odometer, crate::signals::Odometer::GnssSpeed { .. }),
+            "baro_drift" => signals.has_baro,
+            _ => true,
+        })
+        .collect()
+}
+
 /// Prefix of the per-channel bias effect ids.
 pub const CHANNEL_PREFIX: &str = "gyro_bias_channel:";
 
 /// The effect catalogue: ids and what they model.
-const CATALOGUE: [(&str, &str); 5] = [
+const CATALOGUE: [(&str, &str); 6] = [
     ("gyro_scale", "per-axis gyro scale-factor error (3)"),
     (
         "gps_lag",
@@ -160,6 +178,10 @@ const CATALOGUE: [(&str, &str); 5] = [
     (
         "gps_outliers",
         "robust (Cauchy) loss that stops multipath jumps bending the path",
+    ),
+    (
+        "speed_lag",
+        "the GNSS speed that gives the distance lags the gyro (1, s; rides without a wheel sensor)",
     ),
 ];
 
@@ -187,6 +209,7 @@ pub fn build(
             planar: signals.attitude.is_planar(),
         }),
         "odometer_gain" => Box::new(OdometerGain),
+        "speed_lag" => Box::new(SpeedLag::new(signals)?),
         "gyro_bias" => Box::new(GyroBias::new(start, signals.attitude.is_planar())),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,

@@ -42,10 +42,13 @@ fn catalogue_model_with_noise(tau: Option<f64>, white: f64) -> Model {
         &["gps_lag", "gps_outliers"],
     ));
     let mut effects = vec!["paper".to_string()];
+    // Every effect of the catalogue that a wheel-sensor ride offers
+    // (`speed_lag` needs a distance from the GNSS speed).
     effects.extend(
         effects::catalogue(&["temp_c".to_string()])
             .into_iter()
-            .map(|(id, _)| id),
+            .map(|(id, _)| id)
+            .filter(|id| id != "speed_lag"),
     );
     let spec = ModelSpec {
         effects,
@@ -57,6 +60,23 @@ fn catalogue_model_with_noise(tau: Option<f64>, white: f64) -> Model {
     let m = Model::new(sig, spec).unwrap();
     assert_eq!(m.effects().len(), 12, "{:?}", m.effect_ids());
     m
+}
+
+/// A ride whose distance is the GNSS speed's, with `speed_lag` chained
+/// before `odometer_gain` at the distance site, and `gps_lag`.
+fn gnss_speed_model() -> Model {
+    let mut sig = crate::testing::simulated_signals(4, 60.0, &["gps_lag"]);
+    sig.odometer = crate::signals::Odometer::GnssSpeed {
+        samples: 60,
+        standing_s: 0.0,
+        gaps: Vec::new(),
+    };
+    let spec = ModelSpec {
+        effects: vec!["paper".into(), "speed_lag".into(), "gps_lag".into()],
+        segment_s: 7.0,
+        ..ModelSpec::default()
+    };
+    Model::new(Arc::new(sig), spec).unwrap()
 }
 
 /// A parameter vector away from the start so every term is non-trivial; the
@@ -80,6 +100,7 @@ fn models() -> Vec<Model> {
         correlated_model(Increment::Exact, Some(0.01), Some(20.0)),
         catalogue_model_with(Some(45.0)),
         catalogue_model_with_noise(Some(45.0), 1.5),
+        gnss_speed_model(),
     ]
 }
 
