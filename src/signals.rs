@@ -517,7 +517,8 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 /// [`STANDING_SPEED_MPS`] and the gyro below [`STANDING_RATE_DPS`]), which
 /// get none. Before the first and after the last sample the speed is held.
 /// Gaps longer than [`GNSS_SPEED_GAP_S`] are bridged the same way and
-/// listed: there the distance is a guess the fit's gain cannot correct.
+/// listed: there the distance is a guess the fit's gain cannot correct, so
+/// each gap's distance is a parameter of the fit (`effects::GnssGaps`).
 pub fn distance_from_gnss_speed(
     speed: &[Option<f64>],
     log: &RideLog,

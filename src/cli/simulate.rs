@@ -12,7 +12,7 @@ pub struct SimulateArgs {
     /// Logging rate (Hz).
     #[arg(long, default_value_t = 100.0)]
     pub rate: f64,
-    /// Hidden effects, comma separated: gyro_scale, gps_lag, mount_misalignment, gyro_bias_channel:temp_c, gps_outliers.
+    /// Hidden effects, comma separated: gyro_scale, gps_lag, mount_misalignment, gyro_bias_channel:temp_c, gps_outliers, speed_lag (with --gnss-speed).
     #[arg(long, default_value = "")]
     pub hidden: String,
     /// Log cumulative distance (odo_m) instead of wheel pulses.
@@ -41,6 +41,10 @@ pub struct SimulateArgs {
     /// The gyro bias's random-walk density (deg/s/sqrt(s)); drawn in 0.002-0.004 when not given.
     #[arg(long)]
     pub bias_walk: Option<f64>,
+    /// Log the GNSS receiver's ground speed with every fix (gps_speed_mps), the
+    /// distance of a ride without a wheel sensor (fit it with --distance gnss).
+    #[arg(long)]
+    pub gnss_speed: bool,
     /// Where to write the ride log.
     #[arg(long)]
     pub out: PathBuf,
@@ -76,6 +80,7 @@ pub fn simulate(args: &SimulateArgs) -> Result<()> {
             .parse()
             .map_err(|e| anyhow::anyhow!("--gps: {e}"))?,
         bias_walk_dps_sqrt_s: args.bias_walk,
+        gnss_speed: args.gnss_speed,
     };
     let ride = simulation::simulate(&config)?;
     write_atomically(&args.out, None, |w| w.write_all(ride.log_csv.as_bytes()))?;

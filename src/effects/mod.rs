@@ -6,7 +6,7 @@
 //! | site | what the effect maps | used by |
 //! | --- | --- | --- |
 //! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments`, `gyro_bias_channel:<c>`, `gyro_scale` |
-//! | distance | odometer distance `d_j` of step `j` -> corrected distance | `speed_lag`, `odometer_gain` |
+//! | distance | odometer distance `d_j` of step `j` -> corrected distance | `speed_lag`, `odometer_gain`, `gnss_gaps` |
 //! | forward axis | the vehicle's forward axis in sensor axes, `dir_t = q_t f` | `mount_misalignment` |
 //! | start | initial orientation and position | `initial_orientation`, `initial_position` |
 //! | observation time | the instant a fix refers to (`t - lag`, path interpolated) | `gps_lag` |
@@ -25,6 +25,7 @@
 
 mod baro_drift;
 mod baro_offset;
+mod gnss_gaps;
 mod gps_lag;
 mod gps_outliers;
 mod gyro_bias;
@@ -39,6 +40,7 @@ mod speed_lag;
 
 pub use baro_drift::BaroDrift;
 pub use baro_offset::BaroOffset;
+pub use gnss_gaps::GnssGaps;
 pub use gps_lag::GpsLag;
 pub use gps_outliers::GpsOutliers;
 pub use gyro_bias::DEG_PER_RAD;
@@ -79,7 +81,9 @@ pub const PAPER: [&str; 5] = [
 /// Expand a list of ids (`paper` stands for the paper's five) into effect ids
 /// in registry order, without duplicates. `-id` takes an effect out again
 /// (`paper,-odometer_gain`: the paper's model with the odometer taken as
-/// calibrated). `baro_offset` is added whenever the log has a barometer.
+/// calibrated). `baro_offset` is added whenever the log has a barometer, and
+/// `gnss_gaps` whenever the distance is the GNSS speed's and it has gaps
+/// (`-gnss_gaps` takes it out).
 pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelError> {
     let mut ids: Vec<String> = Vec::new();
     let mut removed: Vec<String> = Vec::new();
@@ -98,6 +102,9 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
             }
         }
     }
+    if GnssGaps::applies(signals) {
+        ids.push("gnss_gaps".into());
+    }
     ids.retain(|id| !removed.contains(id));
     if signals.has_baro {
         ids.push("baro_offset".into());
@@ -109,11 +116,12 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
 }
 
 /// All ids in registry order (the order effects are chained in).
-pub const REGISTRY: [&str; 13] = [
+pub const REGISTRY: [&str; 14] = [
     "initial_position",
     "initial_orientation",
     "speed_lag",
     "odometer_gain",
+    "gnss_gaps",
     "gyro_bias",
     "gyro_bias_segments",
     CHANNEL_PREFIX,
@@ -210,6 +218,7 @@ pub fn build(
         }),
         "odometer_gain" => Box::new(OdometerGain),
         "speed_lag" => Box::new(SpeedLag::new(signals)?),
+        "gnss_gaps" => Box::new(GnssGaps::new(signals)?),
         "gyro_bias" => Box::new(GyroBias::new(start, signals.attitude.is_planar())),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,
@@ -244,14 +253,15 @@ pub fn build(
 }
 
 /// A model's effect list ("initial_position, ..., gps_lag") with the
-/// paper's five said once: "paper + gps_lag" (a barometer's offset, which
-/// comes with the data, is left out); other lists as they are.
+/// paper's five said once: "paper + gps_lag" (a barometer's offset and the
+/// GNSS gaps' distances, which come with the data, are left out); other
+/// lists as they are.
 pub fn short_model(model: &str) -> String {
     let ids: Vec<&str> = model.split(", ").collect();
     if PAPER.iter().all(|p| ids.contains(p)) {
         let extra: Vec<&str> = ids
             .into_iter()
-            .filter(|i| !PAPER.contains(i) && *i != "baro_offset")
+            .filter(|i| !PAPER.contains(i) && *i != "baro_offset" && *i != "gnss_gaps")
             .collect();
         if extra.is_empty() {
             "paper".to_string()

@@ -63,20 +63,23 @@ fn catalogue_model_with_noise(tau: Option<f64>, white: f64) -> Model {
 }
 
 /// A ride whose distance is the GNSS speed's, with `speed_lag` chained
-/// before `odometer_gain` at the distance site, and `gps_lag`.
+/// before `odometer_gain` at the distance site and `gnss_gaps` after it
+/// (two gaps), and `gps_lag`.
 fn gnss_speed_model() -> Model {
     let mut sig = crate::testing::simulated_signals(4, 60.0, &["gps_lag"]);
     sig.odometer = crate::signals::Odometer::GnssSpeed {
         samples: 60,
         standing_s: 0.0,
-        gaps: Vec::new(),
+        gaps: vec![(10.0, 14.0), (30.5, 40.0)],
     };
     let spec = ModelSpec {
         effects: vec!["paper".into(), "speed_lag".into(), "gps_lag".into()],
         segment_s: 7.0,
         ..ModelSpec::default()
     };
-    Model::new(Arc::new(sig), spec).unwrap()
+    let m = Model::new(Arc::new(sig), spec).unwrap();
+    assert!(m.effect_index("gnss_gaps").is_some(), "{:?}", m.effect_ids());
+    m
 }
 
 /// A parameter vector away from the start so every term is non-trivial; the

@@ -9,7 +9,7 @@
 //! temperature channel (1 Hz) from a thermal model of the logger
 //! ([`thermal`]). Optional *hidden* effects, which the paper's model lacks:
 //! `gyro_scale`, `gps_lag`, `mount_misalignment`, `gyro_bias_channel:temp_c`,
-//! `gps_outliers`.
+//! `gps_outliers`, and with the GNSS speed logged (`gnss_speed`) `speed_lag`.
 //!
 //! The gyro reading of row `k` is the exact mean body rate over
 //! `(t_{k-1}, t_k]`, `Log(R_{k-1}^T R_k) / dt`, computed from the true
@@ -38,12 +38,13 @@ pub use urban::GpsEnvironment;
 use urban::UrbanGps;
 
 /// Effects the simulator can hide in a ride.
-pub const HIDDEN_EFFECTS: [&str; 5] = [
+pub const HIDDEN_EFFECTS: [&str; 6] = [
     "gyro_scale",
     "gps_lag",
     "mount_misalignment",
     "gyro_bias_channel:temp_c",
     "gps_outliers",
+    "speed_lag",
 ];
 
 #[derive(Debug, Error)]
@@ -80,6 +81,10 @@ pub struct SimConfig {
     pub gps: GpsEnvironment,
     /// The gyro bias's random-walk density (deg/s/sqrt(s)); `None`: drawn in 0.002-0.004.
     pub bias_walk_dps_sqrt_s: Option<f64>,
+    /// Log the GNSS receiver's ground speed with every fix (`gps_speed_mps`,
+    /// 0.05 m/s of noise), from which a ride without a wheel sensor takes
+    /// its distance (`--distance gnss`).
+    pub gnss_speed: bool,
 }
 
 impl Default for SimConfig {
@@ -96,6 +101,7 @@ impl Default for SimConfig {
             gyro_axes: None,
             gps: GpsEnvironment::Open,
             bias_walk_dps_sqrt_s: None,
+            gnss_speed: false,
         }
     }
 }
@@ -123,6 +129,8 @@ pub struct SimTruth {
     pub bias_walk_dps_sqrt_s: f64,
     pub gps_outages_s: Vec<(f64, f64)>,
     pub gps_lag_s: Option<f64>,
+    /// How late the logged GNSS speed is (s): it is the speed at `t - lag`.
+    pub speed_lag_s: Option<f64>,
     pub gyro_scale: Option<[f64; 3]>,
     /// Sensor frame rotated from the bike's frame (roll, pitch, yaw, deg).
     pub mount_misalignment_deg: Option<[f64; 3]>,
@@ -181,6 +189,11 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         if !HIDDEN_EFFECTS.contains(&h.as_str()) {
             return Err(SimulationError::UnknownHidden(h.clone()));
         }
+    }
+    if hidden_has(config, "speed_lag") && !config.gnss_speed {
+        return Err(SimulationError::Setting(
+            "a hidden speed_lag needs the GNSS speed logged (--gnss-speed)".into(),
+        ));
     }
     if !(config.duration_s.is_finite() && config.duration_s >= 10.0) {
         return Err(SimulationError::Setting(format!(
@@ -340,9 +353,18 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         (false, false) => "",
         (false, true) => ",gps_hacc_m,sats",
     };
+    // The GNSS speed's noise and lag from their own random stream, so every
+    // other draw stays as it was.
+    let mut speed_rng = Rng::new(config.seed ^ 0x5BEE_D1A6_7A60_0F5E);
+    let speed_lag = hidden_has(config, "speed_lag").then(|| speed_rng.range(0.2, 0.6));
+    let speed_col = if config.gnss_speed {
+        ",gps_speed_mps"
+    } else {
+        ""
+    };
     let _ = writeln!(
         log,
-        "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m{extra_cols}"
+        "t_s,gx_dps,gy_dps,gz_dps,{distance_col},lat_deg,lon_deg,gps_alt_m{extra_cols}{speed_col}"
     );
     let mut truth_csv = String::with_capacity(n * 44);
     let _ = writeln!(truth_csv, "t_s,lat_deg,lon_deg,alt_m");
@@ -422,6 +444,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         // GPS.
         let mut fix = String::from(",,");
         let mut urban_fields = String::from(",,");
+        let mut speed_field = String::new();
         if t + 0.5 * dt >= next_fix {
             next_fix += 1.0 / gps_hz;
             let noise =
@@ -453,6 +476,12 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
                 }
                 let gp = frame.to_geodetic(&p);
                 fix = format!("{:.8},{:.8},{:.1}", gp.lat_deg, gp.lon_deg, gp.alt_m);
+                if config.gnss_speed {
+                    let moving =
+                        speed_lag.map_or(st.speed, |lag| route.state((t - lag).max(0.0)).speed);
+                    let v = (moving.abs() + 0.05 * speed_rng.normal()).max(0.0);
+                    speed_field = format!("{v:.3}");
+                }
             }
         }
         let baro = if k % baro_every == 0 {
@@ -477,6 +506,10 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         };
         if urban {
             tail.push_str(&urban_fields);
+        }
+        if config.gnss_speed {
+            tail.push(',');
+            tail.push_str(&speed_field);
         }
         let _ = writeln!(
             log,
@@ -504,6 +537,7 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         bias_walk_dps_sqrt_s: bias_walk,
         gps_outages_s: outages,
         gps_lag_s: gps_lag,
+        speed_lag_s: speed_lag,
         gyro_scale: scale,
         mount_misalignment_deg: misalign,
         temp_coefficient_dps_per_c: temp_coeff,
