@@ -269,6 +269,13 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
     fn initial_orientation(&self, _p: &[f64]) -> Option<Vector3<f64>> {
         None
     }
+    /// Variance (m^2) of the path along the track at row `j` that no
+    /// parameter carries: a distance bridged without a measurement, whose
+    /// spread inside the bridge the fit cannot see (added to the path's
+    /// covariance, [`crate::model::Uncertainty`]).
+    fn along_track_variance(&self, _j: usize) -> f64 {
+        0.0
+    }
     /// Offset (m) added to the start position guess.
     fn initial_position(&self, _p: &[f64]) -> Option<Vector3<f64>> {
         None

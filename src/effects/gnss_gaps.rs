@@ -16,11 +16,21 @@
 //! `d'_j = d_j + c_g dt_j / T_g` for the steps of gap `g` (length `T_g`),
 //! `d d'_j / d c_g = dt_j / T_g`.
 //!
-//! Its 1-sigma is part of the path's covariance, so the uncertainty band
-//! widens where the gap's distance is not measured. Prior `c_g ~ N(0, (2
-//! m/s T_g)^2)`: a vehicle's mean speed over a gap is within a few m/s of
-//! the one interpolated between its ends; the prior holds a gap that no fix
-//! follows (at a ride's end).
+//! Prior `c_g ~ N(0, (2 m/s T_g)^2)`: a vehicle's mean speed over a gap is
+//! within a few m/s of the one interpolated between its ends; the prior
+//! holds a gap that no fix follows (at a ride's end).
+//!
+//! The band: `c_g`'s sigma is part of the path's covariance, but how the
+//! gap's distance is spread inside it (a stop at a light, then a sprint) no
+//! parameter carries. Taking the speed's error against the interpolation as
+//! a Brownian bridge of intensity `q` (m^2/s^3), the distance's error at
+//! `tau` into the gap, with the gap's total pinned by `c_g`, has the variance
+//!
+//! `Var(tau) = q tau^2 (T_g - tau)^2 / (12 T_g)`
+//!
+//! (the integrated bridge less its share of the total; checked by Monte
+//! Carlo), added along the track. `q` is the ride's own: the mean square of
+//! its speed's one-second changes outside the gaps.
 
 use super::{Columns, DistancePartials, Effect, ParamInfo, PriorRows};
 use crate::contract::{ModelError, StartGuess};
@@ -35,6 +45,38 @@ pub struct GnssGaps {
     lengths: Vec<f64>,
     /// Per step: the gap it lies in and its weight `dt_j / T_g`, if any.
     step: Vec<Option<(usize, f64)>>,
+    /// Per step in a gap: the spread of the distance inside it (m^2).
+    variance: Vec<f64>,
+}
+
+/// The intensity `q` (m^2/s^3) of the speed's changes: the mean square of
+/// its one-second changes outside the gaps, from the distance per step.
+fn speed_intensity(signals: &Signals, in_gap: &[Option<(usize, f64)>]) -> f64 {
+    let speed = |j: usize| {
+        if signals.dt[j] > 0.0 {
+            signals.distance[j] / signals.dt[j]
+        } else {
+            0.0
+        }
+    };
+    let (mut sum, mut time) = (0.0, 0.0);
+    let mut last: Option<usize> = None;
+    for j in 1..signals.t.len() {
+        if in_gap[j].is_some() {
+            last = None;
+            continue;
+        }
+        match last {
+            None => last = Some(j),
+            Some(i) if signals.t[j] - signals.t[i] >= 1.0 => {
+                sum += (speed(j) - speed(i)).powi(2);
+                time += signals.t[j] - signals.t[i];
+                last = Some(j);
+            }
+            Some(_) => {}
+        }
+    }
+    if time > 0.0 { sum / time } else { 0.0 }
 }
 
 impl GnssGaps {
@@ -50,18 +92,31 @@ impl GnssGaps {
                 reason: "the distance is not the GNSS speed's".into(),
             });
         };
-        let mut step = vec![None; signals.t.len()];
+        let n = signals.t.len();
+        let mut step = vec![None; n];
         let mut lengths = Vec::with_capacity(gaps.len());
         for (g, &(a, b)) in gaps.iter().enumerate() {
             let length = b - a;
             lengths.push(length);
-            for j in 1..signals.t.len() {
+            for j in 1..n {
                 if signals.t[j] > a && signals.t[j] <= b && length > 0.0 {
                     step[j] = Some((g, signals.dt[j] / length));
                 }
             }
         }
-        Ok(Self { lengths, step })
+        let q = speed_intensity(signals, &step);
+        let mut variance = vec![0.0; n];
+        for (j, v) in variance.iter_mut().enumerate() {
+            if let Some((g, _)) = step[j] {
+                let (length, tau) = (lengths[g], signals.t[j] - gaps[g].0);
+                *v = q * tau * tau * (length - tau).powi(2) / (12.0 * length);
+            }
+        }
+        Ok(Self {
+            lengths,
+            step,
+            variance,
+        })
     }
 }
 
@@ -111,6 +166,10 @@ impl Effect for GnssGaps {
             params.push(g, w);
         }
         DistancePartials { d_in: 1.0, params }
+    }
+
+    fn along_track_variance(&self, j: usize) -> f64 {
+        self.variance.get(j).copied().unwrap_or(0.0)
     }
 }
 
@@ -162,6 +221,22 @@ mod tests {
                 assert!((fd - col).abs() < 1e-9, "step {j} gap {g}: {fd} vs {col}");
             }
         }
+    }
+
+    /// The bridge's spread: nothing at a gap's ends, `q T^3 / 192` in its
+    /// middle, nothing outside the gaps.
+    #[test]
+    fn the_spread_inside_a_gap_is_the_bridges() {
+        let s = signals_with_gaps();
+        let effect = GnssGaps::new(&s).unwrap();
+        let q = speed_intensity(&s, &effect.step);
+        assert!(q > 0.0);
+        let row = |t: f64| s.t.partition_point(|&v| v < t);
+        let mid = effect.along_track_variance(row(35.25));
+        let expect = q * 9.5f64.powi(3) / 192.0;
+        assert!((mid - expect).abs() < 0.01 * expect, "{mid} vs {expect}");
+        assert!(effect.along_track_variance(row(30.51)) < 0.01 * mid);
+        assert_eq!(effect.along_track_variance(row(20.0)), 0.0);
     }
 
     #[test]

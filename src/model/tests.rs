@@ -78,7 +78,11 @@ fn gnss_speed_model() -> Model {
         ..ModelSpec::default()
     };
     let m = Model::new(Arc::new(sig), spec).unwrap();
-    assert!(m.effect_index("gnss_gaps").is_some(), "{:?}", m.effect_ids());
+    assert!(
+        m.effect_index("gnss_gaps").is_some(),
+        "{:?}",
+        m.effect_ids()
+    );
     m
 }
 

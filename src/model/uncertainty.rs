@@ -9,8 +9,10 @@
 //! parameter's variance, and at every row of the path the covariance of what
 //! moves it there, which the path's derivatives (one prefix sweep, see
 //! [`super::jacobian`]) turn into the path's covariance
-//! `Cov(p_j) = H_j P H_j^T`. A model without segment biases is small enough
-//! for the dense normal equations (parameters only).
+//! `Cov(p_j) = H_j P H_j^T`, plus what an effect says no parameter carries
+//! (`Effect::along_track_variance`: a GNSS-speed gap's spread inside it).
+//! A model without segment biases is small enough for the dense normal
+//! equations (parameters only).
 //!
 //! The measurements and the history behind these choices: docs/uncertainty.md
 //! (how well the sigmas hold the truth, measured).
@@ -111,10 +113,24 @@ impl Model {
         let widen = inflation * inflation;
         let mut path = vec![[f64::NAN; 4]; rows.len()];
         let mut k = 0;
-        self.prefix_sweep(theta, &free, rows, |row, p, _, sums| {
+        let bridged: Vec<&Box<dyn crate::effects::Effect>> = self
+            .effects
+            .iter()
+            .filter(|e| e.acts_on_distance())
+            .collect();
+        self.prefix_sweep(theta, &free, rows, |row, p, delta, sums| {
             while k < rows.len() && rows[k] == row {
                 let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
                 path[k] = c.map(|v| v * widen);
+                // A bridged distance's own spread, along the step's direction.
+                let along: f64 = bridged.iter().map(|e| e.along_track_variance(row)).sum();
+                let h = (delta.x * delta.x + delta.y * delta.y).sqrt();
+                if along > 0.0 && h > 0.0 {
+                    let (ue, un) = (delta.x / h, delta.y / h);
+                    path[k][0] += along * ue * ue;
+                    path[k][1] += along * un * un;
+                    path[k][3] += along * ue * un;
+                }
                 k += 1;
             }
         });
