@@ -26,12 +26,12 @@ fn fit_against_pose(ride: &Path, options: &ImportOptions) -> (f64, f64, Odometer
     (path, fixes, odometer)
 }
 
-/// Like [`fit_against_pose`] under `settings`, with the fitted parameters.
+/// Like [`fit_against_pose`] under `settings`, with the fitted `speed_lag`.
 fn fit_with(
     ride: &Path,
     options: &ImportOptions,
     settings: FitSettings,
-) -> (f64, f64, Odometer, Vec<(String, f64)>) {
+) -> (f64, f64, Odometer, Option<f64>) {
     let imported = gyropath::pipeline::open(ride, options).expect("open");
     let signals = gyropath::pipeline::signals(imported).expect("signals");
     let (track, matched) =
@@ -39,18 +39,15 @@ fn fit_with(
     let mut fit = Reconstruction::new(signals.clone(), settings).expect("fit");
     fit.finish();
     let c = compare(fit.model(), fit.params(), &track, &matched);
-    let params = fit
+    let lag = fit
         .model()
-        .param_infos()
-        .into_iter()
-        .map(|(id, _)| id)
-        .zip(fit.params().iter().copied())
-        .collect();
+        .effect_params(fit.params(), "speed_lag")
+        .map(|p| p[0]);
     (
         c.horizontal.rms_m,
         c.fixes.expect("fixes").rms_m,
         signals.odometer.clone(),
-        params,
+        lag,
     )
 }
 
@@ -175,12 +172,8 @@ fn without_the_can_speed_the_gnss_speed_gives_the_distance() {
     // along the track (measured: 1.51 m, lag 0.043 s; the fixes 1.50 m).
     let mut settings = FitSettings::default();
     settings.model.effects = vec!["paper".into(), "speed_lag".into()];
-    let (lagged, _, _, params) = fit_with(&segment(), &options, settings);
-    let lag = params
-        .iter()
-        .find(|(id, _)| id == "speed_lag")
-        .map(|p| p.1)
-        .expect("speed_lag's parameter");
+    let (lagged, _, _, lag) = fit_with(&segment(), &options, settings);
+    let lag = lag.expect("speed_lag's parameter");
     println!("with speed_lag: {lagged:.3} m, lag {lag:.4} s");
     assert!((0.02..0.08).contains(&lag), "{lag} s");
     assert!(

@@ -303,6 +303,11 @@ impl Model {
         self.effects.iter().position(|e| e.id() == id)
     }
 
+    /// The parameters of the effect `id` in `theta`, if the model has it.
+    pub fn effect_params<'t>(&self, theta: &'t [f64], id: &str) -> Option<&'t [f64]> {
+        self.effect_index(id).map(|e| &theta[self.range(e)])
+    }
+
     /// Starting parameter vector.
     pub fn initial_params(&self) -> Vec<f64> {
         self.effects
