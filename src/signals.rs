@@ -36,6 +36,13 @@ pub enum SignalError {
 /// between their samples.
 pub const MIN_GYRO_RATE_HZ: f64 = 2.0;
 
+/// A log's rate (Hz): one over the median step of its times `t_s`, which
+/// a few gaps or a burst do not move.
+pub fn median_rate_hz(t_s: &[f64]) -> f64 {
+    let mut dt: Vec<f64> = t_s.windows(2).map(|w| w[1] - w[0]).collect();
+    1.0 / crate::statistics::median(&mut dt)
+}
+
 /// One GPS fix, in the local frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fix {
@@ -301,7 +308,7 @@ impl Signals {
         for j in 1..n {
             dt[j] = t[j] - t[j - 1];
         }
-        let rate = 1.0 / crate::statistics::median(&mut dt[1..].to_vec());
+        let rate = median_rate_hz(&t);
         if rate < MIN_GYRO_RATE_HZ {
             return Err(unusable(format!(
                 "the gyro is logged at {rate:.2} Hz ({n} rows over {:.0} s): far too slow to integrate a vehicle's turns, which take a few seconds; a path needs a gyro at {MIN_GYRO_RATE_HZ} Hz or more",

@@ -55,15 +55,11 @@ const fn key(k: &[u8; 4]) -> TagId {
 
 /// Read a camera file as a ride log.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
-    let file = path.display().to_string();
+    let (mut stream, file) = super::open_file(path)?;
     let bad = |message: String| LoadError::File {
         file: file.clone(),
         message,
     };
-    let mut stream = std::fs::File::open(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
     let size = stream
         .metadata()
         .map_err(|error| LoadError::Io {

@@ -158,11 +158,7 @@ impl Messages {
 
 /// Read a DataFlash log as a ride log.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
-    let file = path.display().to_string();
-    let stream = std::fs::File::open(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (stream, file) = super::open_file(path)?;
     parse(std::io::BufReader::new(stream), &file)
 }
 

@@ -34,7 +34,7 @@ use std::io::BufRead;
 use std::path::Path;
 
 use super::LoadError;
-use super::timeline::{GnssSample, place_gnss};
+use super::timeline::{GnssSample, nearest_row, place_gnss};
 use crate::ride::RideLog;
 
 /// Whether the first bytes of a file are a GnssLogger header.
@@ -47,9 +47,7 @@ pub fn is_gnsslogger(head: &[u8]) -> bool {
 /// folder's `.txt` files are rides only when it does).
 pub fn is_gnsslogger_file(path: &Path) -> bool {
     let mut head = [0u8; 256];
-    std::fs::File::open(path)
-        .and_then(|mut f| super::ros1::read_full(&mut f, &mut head))
-        .is_ok_and(|n| is_gnsslogger(&head[..n]))
+    super::head(path, &mut head).is_ok_and(|n| is_gnsslogger(&head[..n]))
 }
 
 /// One record read from a line: its line number and its values by column.
@@ -189,11 +187,7 @@ impl Table<'_> {
 
 /// Read a GnssLogger file as a ride log.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
-    let file = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (f, file) = super::open_file(path)?;
     parse(std::io::BufReader::new(f), &file)
 }
 
@@ -271,18 +265,12 @@ pub fn parse(reader: impl BufRead, file: &str) -> Result<RideLog, LoadError> {
     if let Some(accel) = accel {
         // Each accelerometer sample on the gyro row nearest it, within half
         // the gyro's median step (phones log the two at their own rates).
-        let mut steps: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-        steps.sort_by(f64::total_cmp);
-        let half = steps[steps.len() / 2] / 2.0;
+        let half = 0.5 / crate::signals::median_rate_hz(&log.t_s);
         let mut column = vec![None; n];
         for (t, _, a) in accel {
             let t = t - t0;
-            let i = log.t_s.partition_point(|&v| v < t);
-            let row = [i.checked_sub(1), (i < n).then_some(i)]
-                .into_iter()
-                .flatten()
-                .min_by(|&a, &b| (log.t_s[a] - t).abs().total_cmp(&(log.t_s[b] - t).abs()));
-            if let Some(row) = row.filter(|&r| (log.t_s[r] - t).abs() <= half) {
+            let row = nearest_row(&log.t_s, t);
+            if (log.t_s[row] - t).abs() <= half {
                 column[row] = Some(a);
             }
         }

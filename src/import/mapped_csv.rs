@@ -143,11 +143,7 @@ struct Table {
 impl Table {
     /// Read the columns `wanted` (every one must exist) of the CSV at `path`.
     fn read(path: &Path, wanted: &[&str]) -> Result<Self, LoadError> {
-        let file = path.display().to_string();
-        let f = std::fs::File::open(path).map_err(|error| LoadError::Io {
-            file: file.clone(),
-            error,
-        })?;
+        let (f, file) = super::open_file(path)?;
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .comment(Some(b'#'))

@@ -245,6 +245,21 @@ impl Imported {
 }
 
 /// The bytes of the file at `path` and its name for messages.
+/// Open `path` for reading, the I/O error naming it; with its name for messages.
+pub(crate) fn open_file(path: &Path) -> Result<(std::fs::File, String), LoadError> {
+    let file = path.display().to_string();
+    match std::fs::File::open(path) {
+        Ok(f) => Ok((f, file)),
+        Err(error) => Err(LoadError::Io { file, error }),
+    }
+}
+
+/// The first bytes of the file at `path` (as many as fit `buf`, fewer for a
+/// short file): what its kind is told by.
+pub(crate) fn head(path: &Path, buf: &mut [u8]) -> std::io::Result<usize> {
+    std::fs::File::open(path).and_then(|mut f| ros1::read_full(&mut f, buf))
+}
+
 pub(crate) fn read_bytes(path: &Path) -> Result<(Vec<u8>, String), LoadError> {
     let file = path.display().to_string();
     match std::fs::read(path) {
@@ -264,14 +279,12 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
     if path.is_dir() {
         return Ok(SourceKind::Ros2Mcap);
     }
-    let mut head = [0u8; 256];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| ros1::read_full(&mut f, &mut head))
-        .map_err(|error| LoadError::Io {
-            file: path.display().to_string(),
-            error,
-        })?;
-    let head = &head[..n];
+    let mut buf = [0u8; 256];
+    let n = head(path, &mut buf).map_err(|error| LoadError::Io {
+        file: path.display().to_string(),
+        error,
+    })?;
+    let head = &buf[..n];
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
@@ -298,11 +311,9 @@ pub fn detect(path: &Path, options: &ImportOptions) -> Result<SourceKind, LoadEr
 /// FIT: no gyro), told by its content: a ride needs a gyro, so opening one
 /// as a ride says what it is and how it can serve instead.
 fn gnss_only(path: &Path) -> Option<String> {
-    let mut head = [0u8; 64];
-    let n = std::fs::File::open(path)
-        .and_then(|mut f| ros1::read_full(&mut f, &mut head))
-        .ok()?;
-    let head = &head[..n];
+    let mut buf = [0u8; 64];
+    let n = head(path, &mut buf).ok()?;
+    let head = &buf[..n];
     let text = String::from_utf8_lossy(head);
     let trimmed = text.trim_start_matches('\u{feff}').trim_start();
     if fit::is_fit(head) {

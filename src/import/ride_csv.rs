@@ -16,14 +16,8 @@ use super::{LoadError, RideLog};
 
 /// Load a ride log from a file.
 pub fn load_file(path: &Path) -> Result<RideLog, LoadError> {
-    let file = std::fs::File::open(path).map_err(|error| LoadError::Io {
-        file: path.display().to_string(),
-        error,
-    })?;
-    parse_reader(
-        std::io::BufReader::with_capacity(1 << 20, file),
-        &path.display().to_string(),
-    )
+    let (f, file) = super::open_file(path)?;
+    parse_reader(std::io::BufReader::with_capacity(1 << 20, f), &file)
 }
 
 /// Load a ride log from a path given as a string (convenience for callers).

@@ -27,11 +27,7 @@ const OP_CONNECTION: u8 = 0x07;
 
 /// Read the bag at `path`: the messages of every topic gyropath can use.
 pub fn read(path: &Path, choice: &TopicChoice) -> Result<(Recording, Topics), LoadError> {
-    let file = path.display().to_string();
-    let f = std::fs::File::open(path).map_err(|error| LoadError::Io {
-        file: file.clone(),
-        error,
-    })?;
+    let (f, file) = super::open_file(path)?;
     read_from(BufReader::with_capacity(1 << 20, f), &file, choice)
 }
 

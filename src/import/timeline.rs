@@ -299,6 +299,19 @@ impl Recording {
     }
 }
 
+/// The row of the times `t` (increasing, not empty) nearest `x`; the
+/// earlier of two as near.
+pub(crate) fn nearest_row(t: &[f64], x: f64) -> usize {
+    let i = t.partition_point(|&v| v < x);
+    if i == 0 {
+        0
+    } else if i >= t.len() || x - t[i - 1] <= t[i] - x {
+        i - 1
+    } else {
+        i
+    }
+}
+
 /// One GNSS sample of a device that logs its receiver apart from its gyro
 /// (cameras, autopilots, dashcams): its time on the ride's clock (s), and
 /// what it measured.
@@ -335,17 +348,7 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
     let (Some(&first_t), Some(&last_t)) = (log.t_s.first(), log.t_s.last()) else {
         return None;
     };
-    let t = &log.t_s;
-    let nearest = |x: f64| {
-        let i = t.partition_point(|&v| v < x);
-        if i == 0 {
-            0
-        } else if i >= n || x - t[i - 1] <= t[i] - x {
-            i - 1
-        } else {
-            i
-        }
-    };
+    let nearest = |x: f64| nearest_row(&log.t_s, x);
     let mut rows = Vec::with_capacity(samples.len());
     let mut chosen: BTreeMap<i64, (f64, usize)> = BTreeMap::new();
     let mut start = None;

@@ -4,8 +4,7 @@ use super::*;
 
 /// Returns whether the gyro is fast enough to integrate at all.
 pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) -> bool {
-    let mut dt: Vec<f64> = log.t_s.windows(2).map(|w| w[1] - w[0]).collect();
-    let rate = 1.0 / crate::statistics::median(&mut dt);
+    let rate = crate::signals::median_rate_hz(&log.t_s);
     let (level, note) = if rate < crate::signals::MIN_GYRO_RATE_HZ {
         (
             Level::Problem,
