@@ -34,7 +34,7 @@ use std::path::Path;
 use ardupilot_binlog::{Entry, Reader};
 
 use super::LoadError;
-use super::timeline::{GnssSample, place_gnss};
+use super::timeline::{GnssSample, nearest_row, place_gnss};
 use crate::ride::RideLog;
 
 /// The first bytes of every DataFlash log: a message header and the `FMT`
@@ -235,13 +235,12 @@ pub fn parse(stream: impl Read, file: &str) -> Result<RideLog, LoadError> {
         let mut odo = vec![None; n];
         for (t_us, d) in &messages.wenc {
             let t = at(*t_us);
-            let i = log.t_s.partition_point(|&v| v < t);
-            if i >= n || (i == 0 && t < log.t_s[0]) {
+            if !(log.t_s[0]..=log.t_s[n - 1]).contains(&t) {
                 continue;
             }
             let mean = wheels.iter().map(|&w| d[w]).sum::<f64>() / wheels.len() as f64;
             if mean.is_finite() {
-                odo[i] = Some(mean);
+                odo[nearest_row(&log.t_s, t)] = Some(mean);
             }
         }
         if odo.iter().flatten().count() >= 2 {
