@@ -98,10 +98,14 @@ impl GnssGaps {
         for (g, &(a, b)) in gaps.iter().enumerate() {
             let length = b - a;
             lengths.push(length);
-            for j in 1..n {
-                if signals.t[j] > a && signals.t[j] <= b && length > 0.0 {
-                    step[j] = Some((g, signals.dt[j] / length));
-                }
+            if length <= 0.0 {
+                continue;
+            }
+            // The steps ending inside the gap, `a < t_j <= b`.
+            let first = signals.t.partition_point(|&t| t <= a).max(1);
+            let end = signals.t.partition_point(|&t| t <= b);
+            for j in first..end {
+                step[j] = Some((g, signals.dt[j] / length));
             }
         }
         let q = speed_intensity(signals, &step);

@@ -158,7 +158,7 @@ pub fn offered(signals: &Signals) -> Vec<(String, String)> {
     catalogue(&channels)
         .into_iter()
         .filter(|(id, _)| match id.as_str() {
-            "speed_lag" => matches!(signals.odometer, crate::signals::Odometer::GnssSpeed { .. }),
+            "speed_lag" => SpeedLag::applies(signals),
             "baro_drift" => signals.has_baro,
             _ => true,
         })

@@ -37,8 +37,13 @@ pub struct SpeedLag {
 }
 
 impl SpeedLag {
+    /// Whether `signals` take the effect: a distance from the GNSS speed.
+    pub fn applies(signals: &Signals) -> bool {
+        matches!(signals.odometer, Odometer::GnssSpeed { .. })
+    }
+
     pub fn new(signals: &Signals) -> Result<Self, ModelError> {
-        if !matches!(signals.odometer, Odometer::GnssSpeed { .. }) {
+        if !Self::applies(signals) {
             return Err(ModelError::NotApplicable {
                 effect: "speed_lag".into(),
                 reason: format!(
