@@ -456,26 +456,31 @@ pub const SEGMENT_CHOICES: [f64; 5] = [2.5, 5.0, 10.0, 20.0, 40.0];
 /// fitted parameters carried over onto its segments and one Gauss-Newton
 /// step, relative to the best. A difference of a few units is no preference;
 /// finer segments than preferred cost time and gain nothing.
+///
+/// The five are independent and evaluated side by side, as the noise
+/// search's stencils are (one at a time past [`SIDE_BY_SIDE_FIXES`], where
+/// each would hold a chain system of tens of MB).
 pub fn segment_preference(model: &Model, theta: &[f64]) -> Vec<(f64, f64)> {
-    let mut out: Vec<(f64, f64)> = SEGMENT_CHOICES
-        .iter()
-        .filter_map(|&seg| {
-            let spec = ModelSpec {
-                segment_s: seg,
-                ..model.spec.clone()
-            };
-            let m =
-                Model::with_start(model.signals.clone(), spec.clone(), model.start.clone()).ok()?;
-            let t = m.carry_over(model, theta);
-            let free = m.free_mask(&[
-                crate::effects::Role::Global,
-                crate::effects::Role::Segments,
-                crate::effects::Role::Step2Only,
-            ]);
-            let base = m.chain_system(&t, &free)?;
-            Some((seg, neg2_log_likelihood(&m, &base, &t, &free, &spec)?))
-        })
-        .collect();
+    let at = |&seg: &f64| {
+        let spec = ModelSpec {
+            segment_s: seg,
+            ..model.spec.clone()
+        };
+        let m = Model::with_start(model.signals.clone(), spec.clone(), model.start.clone()).ok()?;
+        let t = m.carry_over(model, theta);
+        let free = m.free_mask(&[
+            crate::effects::Role::Global,
+            crate::effects::Role::Segments,
+            crate::effects::Role::Step2Only,
+        ]);
+        let base = m.chain_system(&t, &free)?;
+        Some((seg, neg2_log_likelihood(&m, &base, &t, &free, &spec)?))
+    };
+    let mut out: Vec<(f64, f64)> = if model.signals.fixes.len() <= SIDE_BY_SIDE_FIXES {
+        SEGMENT_CHOICES.par_iter().filter_map(at).collect()
+    } else {
+        SEGMENT_CHOICES.iter().filter_map(at).collect()
+    };
     let best = out.iter().map(|v| v.1).fold(f64::INFINITY, f64::min);
     for v in &mut out {
         v.1 -= best;

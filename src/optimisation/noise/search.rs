@@ -105,8 +105,16 @@ pub(super) const NEWTON_GAIN: f64 = 0.2;
 /// flat direction still steps downhill), at most [`MAX_NEWTON_STEP`] per
 /// coordinate, tried at 1, 2 and 4 times its length side by side, and at
 /// a half and a quarter if none of those lowers `f`. It stops after a step
-/// below [`NEWTON_DONE`] that gains less than [`NEWTON_GAIN`]. The last
-/// stencil, with its cross terms made second-order
+/// that gains less than [`NEWTON_GAIN`] where the step was below
+/// [`NEWTON_DONE`] or, the stencil curving well in every direction
+/// ([`WEAK_CURVATURE`]), the quadratic model, too, expected less than
+/// [`NEWTON_GAIN`]: then what is left to gain is a fraction of one unit of
+/// `-2 ln L`, a few tenths of each setting's 1-sigma (on the GPS wander's
+/// ridge `sigma^2 / tau` the steps went on back and forth by 0.1-0.17 in
+/// `ln tau`, whose 1-sigma is 0.37, for more rounds: 66 likelihoods
+/// instead of 75 on a 30-minute ride, the same estimate). Near a bound it
+/// goes on: the next stencil decides whether the setting is held there.
+/// The last stencil, with its cross terms made second-order
 /// ([`Stencil::symmetric_hessian`]), gives the ranges: a Nelder-Mead search
 /// followed by a central-difference Hessian took 81 likelihoods on a
 /// 30-minute ride with three settings and 145 with four; this takes 39 with
@@ -183,6 +191,10 @@ pub(super) fn newton(
         });
         let eigen = hess.clone().symmetric_eigen();
         let top = eigen.eigenvalues.amax();
+        // Curved in every direction: the quadratic model's expected gain is
+        // a guide (along a weak one, such as a ridge towards a bound, it is
+        // not; see `Stencil::ranges`).
+        let curved = eigen.eigenvalues.min() >= WEAK_CURVATURE;
         let floor = (1e-3 * top).max(0.5);
         let inverse_gradient = eigen.eigenvectors.transpose() * &gradient;
         let scaled = DVector::from_iterator(
@@ -247,7 +259,14 @@ pub(super) fn newton(
                 let gain = value - tried_values[b];
                 value = tried_values[b];
                 x = tried.swap_remove(b);
-                if step_size < NEWTON_DONE && gain < NEWTON_GAIN {
+                // Near a bound (where a setting is held at it), the next
+                // stencil decides whether it goes there ("at least", "at most").
+                let at_edge = free
+                    .iter()
+                    .any(|&d| x[d] <= bounds[d].0 + 2.0 * h || x[d] >= bounds[d].1 - 2.0 * h);
+                if gain < NEWTON_GAIN
+                    && (step_size < NEWTON_DONE || (curved && !at_edge && expected < NEWTON_GAIN))
+                {
                     break;
                 }
             }
@@ -256,7 +275,7 @@ pub(super) fn newton(
     }
     if let Some(stencil) = last {
         let hess = stencil.symmetric_hessian(&f, h);
-        for (i, (b, a)) in stencil.ranges(&f, &hess).into_iter().enumerate() {
+        for (i, (b, a)) in stencil.ranges(&f, &hess, &x, value).into_iter().enumerate() {
             below[stencil.free[i]] = b;
             above[stencil.free[i]] = a;
         }
@@ -334,7 +353,17 @@ impl Stencil {
     /// read quadratically, with its eigenvalue floored, gave the Husky robot
     /// a GPS sigma of 0.02-477 m; read as each setting's own curvature with
     /// the others held, a range far too narrow along a ridge.
-    pub(super) fn ranges(&self, f: &Objective, hess: &DMatrix<f64>) -> Vec<(f64, f64)> {
+    ///
+    /// The scans start from `at` (where the search ended, `f` = `value`
+    /// there), which may lie a last small step from the stencil's centre:
+    /// the curvature changes little over it, the edge of the range does.
+    pub(super) fn ranges(
+        &self,
+        f: &Objective,
+        hess: &DMatrix<f64>,
+        at: &[f64],
+        value: f64,
+    ) -> Vec<(f64, f64)> {
         let m = self.free.len();
         let eigen = hess.clone().symmetric_eigen();
         let mut var = vec![0.0; m];
@@ -350,7 +379,7 @@ impl Stencil {
             }
             for sign in [1.0, -1.0] {
                 let along = |t: &[f64]| {
-                    let mut y = self.centre.clone();
+                    let mut y = at.to_vec();
                     for i in 0..m {
                         y[self.free[i]] += sign * t[0] * v[i];
                     }
@@ -361,7 +390,7 @@ impl Stencil {
                         f: &along,
                         side_by_side: f.side_by_side,
                     },
-                    self.value,
+                    value,
                 );
                 for i in 0..m {
                     let reach = sign * v[i];
