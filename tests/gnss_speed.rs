@@ -16,14 +16,14 @@ use gyropath::optimisation::{FitSettings, Reconstruction};
 use gyropath::signals::{Odometer, Signals};
 use gyropath::simulation::{SimConfig, SimulatedRide, simulate};
 
-/// A simulated ride with the GNSS speed and a hidden speed lag, read without
+/// A simulated ride with the GNSS speed and `hidden` effects, read without
 /// its wheel pulses.
-fn ride(seed: u64, outages: bool) -> (SimulatedRide, Arc<Signals>) {
+fn ride(seed: u64, outages: bool, hidden: &[&str]) -> (SimulatedRide, Arc<Signals>) {
     let sim = simulate(&SimConfig {
         seed,
         gnss_speed: true,
         outages,
-        hidden: vec!["speed_lag".into()],
+        hidden: hidden.iter().map(|h| h.to_string()).collect(),
         ..SimConfig::default()
     })
     .expect("simulate");
@@ -56,7 +56,7 @@ fn fit(sim: &SimulatedRide, sig: &Arc<Signals>, effects: &[&str]) -> (f64, Optio
 #[test]
 fn gnss_gaps_bridge_the_outages_of_a_gnss_speed_distance() {
     for (seed, before) in [(2, 31.6), (3, 21.5)] {
-        let (sim, sig) = ride(seed, true);
+        let (sim, sig) = ride(seed, true, &["speed_lag"]);
         let Odometer::GnssSpeed { gaps, .. } = &sig.odometer else {
             unreachable!()
         };
@@ -80,7 +80,7 @@ fn gnss_gaps_bridge_the_outages_of_a_gnss_speed_distance() {
 
 #[test]
 fn speed_lag_is_recovered_and_lowers_the_error() {
-    let (sim, sig) = ride(1, false);
+    let (sim, sig) = ride(1, false, &["speed_lag"]);
     let lag_true = sim.truth.speed_lag_s.expect("hidden lag");
     let (plain, _, _) = fit(&sim, &sig, &["paper"]);
     let (lagged, lag, _) = fit(&sim, &sig, &["paper", "speed_lag"]);
@@ -91,16 +91,20 @@ fn speed_lag_is_recovered_and_lowers_the_error() {
 }
 
 /// How often the truth lies inside the path's 95 % ellipse, inside the
-/// gaps and outside them (every 50th row of rides 2 and 3). Measured: 0.57
-/// in the gaps with the bridge's spread (`GnssGaps::along_track_variance`),
-/// 0.34 with the gaps' distances' sigmas alone; 0.84 outside. A stop at a
-/// light inside a gap puts the path 2-3 sigma off there: a Brownian speed
-/// does not expect it.
+/// gaps and outside them (every 50th row of rides 2-9, 10 minutes each with
+/// 5-9 stops and two GNSS gaps of 26-60 s; the model the simulator's).
+/// Measured: 0.84 in the gaps, 0.89 outside. Before the ride's own spread
+/// (`GnssGaps::along_track_variance`, the 95th percentile of the bridge's
+/// error over the ride's stretches as long as the gap) laid along the path
+/// itself, a Brownian bridge laid along the step's direction held 0.69:
+/// a stop at a light inside a gap puts the path 20-50 m back along the road,
+/// which a Brownian speed does not expect, and round a corner that is off
+/// the road's direction at the point.
 #[test]
 fn the_band_in_the_gaps_holds_the_truth() {
     let (mut gap_in, mut gap_n, mut out_in, mut out_n) = (0, 0, 0, 0);
-    for seed in [2, 3] {
-        let (sim, sig) = ride(seed, true);
+    for seed in 2..=9 {
+        let (sim, sig) = ride(seed, true, &[]);
         let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
         fit.finish();
         let path = fit.trajectory().p;
@@ -125,6 +129,6 @@ fn the_band_in_the_gaps_holds_the_truth() {
     println!(
         "inside the 95 % ellipse: {gap:.2} in the gaps ({gap_n} rows), {out:.2} outside ({out_n})"
     );
-    assert!(gap >= 0.5, "{gap} in the gaps");
-    assert!(out >= 0.8, "{out} outside");
+    assert!(gap >= 0.8, "{gap} in the gaps");
+    assert!(out >= 0.85, "{out} outside");
 }

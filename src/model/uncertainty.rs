@@ -17,7 +17,7 @@
 //! The measurements and the history behind these choices: docs/uncertainty.md
 //! (how well the sigmas hold the truth, measured).
 
-use nalgebra::DVector;
+use nalgebra::{DVector, Matrix2, Vector2};
 
 use super::chain::PathRows;
 use super::normal::damped_solve;
@@ -113,28 +113,82 @@ impl Model {
         let widen = inflation * inflation;
         let mut path = vec![[f64::NAN; 4]; rows.len()];
         let mut k = 0;
-        let bridged: Vec<&Box<dyn crate::effects::Effect>> = self
-            .effects
-            .iter()
-            .filter(|e| e.acts_on_distance())
-            .collect();
-        self.prefix_sweep(theta, &free, rows, |row, p, delta, sums| {
+        self.prefix_sweep(theta, &free, rows, |row, p, _, sums| {
             while k < rows.len() && rows[k] == row {
                 let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
                 path[k] = c.map(|v| v * widen);
-                // A bridged distance's own spread, along the step's direction.
-                let along: f64 = bridged.iter().map(|e| e.along_track_variance(row)).sum();
-                let h = (delta.x * delta.x + delta.y * delta.y).sqrt();
-                if along > 0.0 && h > 0.0 {
-                    let (ue, un) = (delta.x / h, delta.y / h);
-                    path[k][0] += along * ue * ue;
-                    path[k][1] += along * un * un;
-                    path[k][3] += along * ue * un;
-                }
                 k += 1;
             }
         });
+        self.add_along_track_spread(theta, rows, &mut path);
         Some(Uncertainty { params, path })
+    }
+
+    /// A bridged distance's own spread (`Effect::along_track_variance`,
+    /// `sigma_s^2` in metres of distance), as the spread of the point
+    /// `P(s + e)` along the path itself with `e ~ N(0, sigma_s^2)`: by
+    /// three-point Gauss-Hermite quadrature (nodes `0, +-sqrt(3) sigma_s`,
+    /// weights `2/3, 1/6, 1/6`),
+    ///
+    /// `Cov = 1/6 sum_(+-) (P(s +- sqrt(3) sigma_s) - P(s)) (...)^T`,
+    ///
+    /// the arc clamped to the bridge's own stretch of path. On a straight
+    /// path that is `sigma_s^2 u u^T` along the direction `u`; where the path
+    /// turns inside a gap, a point tens of metres behind along the road is
+    /// off in another direction than the road's at the point, which the
+    /// tangent alone would call impossible (measured on simulated rides with
+    /// stops in their gaps: see `tests/gnss_speed.rs`).
+    fn add_along_track_spread(&self, theta: &[f64], rows: &[usize], path: &mut [[f64; 4]]) {
+        let n = self.signals.len().min(self.horizon());
+        let spread = |j: usize| -> f64 {
+            self.effects
+                .iter()
+                .filter(|e| e.acts_on_distance())
+                .map(|e| e.along_track_variance(j))
+                .sum()
+        };
+        // The bridged runs of rows, each with a row of margin on either side.
+        let mut runs: Vec<(usize, usize)> = Vec::new();
+        let mut j = 0;
+        while j < n {
+            if spread(j) > 0.0 {
+                let a = j.saturating_sub(1);
+                while j < n && spread(j) > 0.0 {
+                    j += 1;
+                }
+                let b = j.min(n - 1);
+                // Runs a row or two apart share their margin: one run.
+                match runs.last_mut() {
+                    Some(last) if a <= last.1 => last.1 = b,
+                    _ => runs.push((a, b)),
+                }
+            }
+            j += 1;
+        }
+        if runs.is_empty() {
+            return;
+        }
+        let held: Vec<usize> = runs.iter().flat_map(|&(a, b)| a..=b).collect();
+        let sparse = self.sparse_path(theta, held);
+        let mut at = 0;
+        for &(a, b) in &runs {
+            let run = PathArc::new((0..=b - a).map(|i| sparse.p_of(at + i).xy()).collect());
+            at += b - a + 1;
+            let first = rows.partition_point(|&r| r < a);
+            for (k, &row) in rows.iter().enumerate().skip(first) {
+                if row > b {
+                    break;
+                }
+                let var = spread(row);
+                if var <= 0.0 {
+                    continue;
+                }
+                let cov = run.spread(row - a, var);
+                path[k][0] += cov[(0, 0)];
+                path[k][1] += cov[(1, 1)];
+                path[k][3] += cov[(0, 1)];
+            }
+        }
     }
 
     /// `sqrt(1 + 2 sum_k rho_k)`: how much the residuals' remaining
@@ -178,6 +232,57 @@ impl Model {
             worst = worst.max(1.0 + 2.0 * sum);
         }
         worst.sqrt()
+    }
+}
+
+/// A stretch of path as a polyline with its arc length: where a point
+/// `s` metres along it lies.
+struct PathArc {
+    points: Vec<Vector2<f64>>,
+    arc: Vec<f64>,
+}
+
+impl PathArc {
+    fn new(points: Vec<Vector2<f64>>) -> Self {
+        let mut arc = vec![0.0; points.len()];
+        for i in 1..points.len() {
+            arc[i] = arc[i - 1] + (points[i] - points[i - 1]).norm();
+        }
+        Self { points, arc }
+    }
+
+    /// The point `s` metres along, clamped to the stretch's ends.
+    fn point_at(&self, s: f64) -> Vector2<f64> {
+        let Some(&last) = self.points.last() else {
+            return Vector2::zeros();
+        };
+        if self.points.len() < 2 {
+            return last;
+        }
+        let i = self
+            .arc
+            .partition_point(|&x| x < s)
+            .clamp(1, self.arc.len() - 1);
+        let (s0, s1) = (self.arc[i - 1], self.arc[i]);
+        let w = if s1 > s0 {
+            ((s - s0) / (s1 - s0)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        self.points[i - 1] + w * (self.points[i] - self.points[i - 1])
+    }
+
+    /// The covariance of `P(s_i + e) - P(s_i)`, `e ~ N(0, var)`, by the
+    /// three-point quadrature of [`Model::add_along_track_spread`].
+    fn spread(&self, i: usize, var: f64) -> Matrix2<f64> {
+        let (here, s) = (self.points[i], self.arc[i]);
+        let reach = (3.0 * var).sqrt();
+        let mut cov = Matrix2::zeros();
+        for side in [-1.0, 1.0] {
+            let d = self.point_at(s + side * reach) - here;
+            cov += d * d.transpose() / 6.0;
+        }
+        cov
     }
 }
 
@@ -317,5 +422,30 @@ mod tests {
             }
             assert!(globals >= 7, "{globals} globals");
         }
+    }
+    /// Along a straight stretch the spread lies along it, `sigma^2 u u^T`;
+    /// where the stretch turns a right angle within reach, the points
+    /// behind and ahead lie on either leg, and the spread covers both.
+    #[test]
+    fn a_bridged_spread_follows_the_path() {
+        let straight = PathArc::new(
+            (0..=100)
+                .map(|i| Vector2::new(0.6, 0.8) * i as f64)
+                .collect(),
+        );
+        let cov = straight.spread(50, 4.0);
+        let expect = Vector2::new(0.6, 0.8) * Vector2::new(0.6, 0.8).transpose() * 4.0;
+        assert!((cov - expect).norm() < 1e-9, "{cov} against {expect}");
+        // East 50 m, then north 50 m; the point at the corner, sigma 10 m.
+        let mut corner: Vec<Vector2<f64>> = (0..=50).map(|i| Vector2::new(i as f64, 0.0)).collect();
+        corner.extend((1..=50).map(|i| Vector2::new(50.0, i as f64)));
+        let l = PathArc::new(corner);
+        let reach = 300f64.sqrt();
+        let cov = l.spread(50, 100.0);
+        let expect = Matrix2::new(reach * reach, 0.0, 0.0, reach * reach) / 6.0;
+        assert!((cov - expect).norm() < 1e-9, "{cov} against {expect}");
+        // Near an end the reach is clamped to the stretch.
+        assert_eq!(l.point_at(-5.0), Vector2::zeros());
+        assert_eq!(l.point_at(1e3), Vector2::new(50.0, 50.0));
     }
 }
