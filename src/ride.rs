@@ -79,6 +79,44 @@ impl RideLog {
         }
     }
 
+    /// Keep only the rows `rows` (their times unchanged, so the log's clock
+    /// ties `t0_unix_s` and `t0_boot_s` still hold): a ride cut to what a
+    /// second source covers.
+    pub fn keep_rows(&mut self, rows: std::ops::Range<usize>) {
+        fn cut<T>(v: &mut Vec<T>, rows: &std::ops::Range<usize>) {
+            v.truncate(rows.end);
+            v.drain(..rows.start.min(v.len()));
+        }
+        cut(&mut self.line, &rows);
+        cut(&mut self.t_s, &rows);
+        cut(&mut self.gyro_dps, &rows);
+        cut(&mut self.fix, &rows);
+        for c in [
+            &mut self.odo_m,
+            &mut self.speed_mps,
+            &mut self.gps_alt_m,
+            &mut self.gps_speed_mps,
+            &mut self.gps_course_deg,
+            &mut self.gps_hacc_m,
+            &mut self.gps_vacc_m,
+            &mut self.baro_alt_m,
+        ]
+        .into_iter()
+        .flatten()
+        {
+            cut(c, &rows);
+        }
+        if let Some(p) = &mut self.wheel_pulse {
+            cut(p, &rows);
+        }
+        if let Some(a) = &mut self.accel_mps2 {
+            cut(a, &rows);
+        }
+        for (_, c) in &mut self.channels {
+            cut(c, &rows);
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.t_s.len()
     }

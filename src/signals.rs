@@ -210,6 +210,11 @@ pub enum Odometer {
         revolutions: usize,
     },
     Cumulative,
+    /// A cumulative distance from a second file, matched by time (a bike
+    /// computer's wheel-speed sensor, `--wheel`): where from, in words.
+    Merged {
+        from: String,
+    },
     /// Integrated from a logged forward speed.
     Speed,
     /// Integrated from the GNSS receiver's ground speed: the log has no
@@ -234,6 +239,7 @@ impl Odometer {
                 revolutions,
             } => format!("wheel pulses ({revolutions} revolutions of {circumference_m:.3} m)"),
             Self::Cumulative => "a cumulative distance".into(),
+            Self::Merged { from } => from.clone(),
             Self::Speed => "a logged forward speed, integrated".into(),
             Self::GnssSpeed {
                 samples,
@@ -461,7 +467,11 @@ pub fn odometer_distance(
     turn_dps: impl Fn(usize) -> f64,
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     if let Some(odo) = &log.odo_m {
-        Ok((distance_from_odometer(odo, log)?, Odometer::Cumulative))
+        let kind = match log.metadata.get("odometer") {
+            Some(from) => Odometer::Merged { from: from.clone() },
+            None => Odometer::Cumulative,
+        };
+        Ok((distance_from_odometer(odo, log)?, kind))
     } else if let Some(speed) = &log.speed_mps {
         Ok((distance_from_speed(speed, log)?, Odometer::Speed))
     } else if let Some(pulses) = &log.wheel_pulse {

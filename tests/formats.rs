@@ -367,3 +367,158 @@ fn a_damaged_camera_file_is_an_error_naming_it() {
     }
     std::fs::remove_dir_all(&dir).expect("clean");
 }
+
+/// A ride log of `fit`'s own track between `from` and `to` (s into the
+/// activity): 100 Hz rows whose yaw rate is the track's turn (its course
+/// from one point to the next, differenced), fixes at its points, no
+/// odometer but the GNSS speed (the distance between points over their
+/// time), and `t0_unix_s` as the activity's clock says, shifted by
+/// `clock_s`: what a camera on the bike would have logged, for the FIT's
+/// wheel distance to be matched to.
+fn ride_along(fit: &gyropath::import::fit::Activity, from: f64, to: f64, clock_s: f64) -> String {
+    let track = &fit.track;
+    let t0 = track.t_s[0] + from;
+    let pts: Vec<(f64, f64, f64)> = track
+        .t_s
+        .iter()
+        .zip(&track.points)
+        .filter(|(t, _)| (t0..=track.t_s[0] + to).contains(*t))
+        .map(|(t, p)| (t - t0, p.lat_deg, p.lon_deg))
+        .collect();
+    // Course (rad, clockwise from north) between consecutive points, unwrapped.
+    let mut course: Vec<(f64, f64)> = Vec::new();
+    for w in pts.windows(2) {
+        let (de, dn) = (
+            (w[1].2 - w[0].2).to_radians() * 6_371_000.0 * w[0].1.to_radians().cos(),
+            (w[1].1 - w[0].1).to_radians() * 6_371_000.0,
+        );
+        let mut c = de.atan2(dn);
+        if let Some(&(_, last)) = course.last() {
+            while c - last > std::f64::consts::PI {
+                c -= 2.0 * std::f64::consts::PI;
+            }
+            while c - last < -std::f64::consts::PI {
+                c += 2.0 * std::f64::consts::PI;
+            }
+        }
+        course.push((0.5 * (w[0].0 + w[1].0), c));
+    }
+    let yaw_dps = |t: f64| {
+        let i = course
+            .partition_point(|c| c.0 < t)
+            .clamp(1, course.len() - 1);
+        let (a, b) = (course[i - 1], course[i]);
+        -(b.1 - a.1).to_degrees() / (b.0 - a.0)
+    };
+    let mut csv = format!(
+        "# t0_unix_s: {:.3}\nt_s,gx_dps,gy_dps,gz_dps,lat_deg,lon_deg,gps_speed_mps\n",
+        t0 + clock_s
+    );
+    let end = pts.last().expect("points").0;
+    let mut k = 0;
+    for j in 0..=(end * 100.0).round() as usize {
+        let t = j as f64 * 0.01;
+        let fix = match pts.get(k) {
+            Some(p) if (p.0 - t).abs() < 0.005 => {
+                k += 1;
+                let speed = pts.get(k).map_or(0.0, |q| {
+                    let (de, dn) = (
+                        (q.2 - p.2).to_radians() * 6_371_000.0 * p.1.to_radians().cos(),
+                        (q.1 - p.1).to_radians() * 6_371_000.0,
+                    );
+                    de.hypot(dn) / (q.0 - p.0)
+                });
+                format!("{:.7},{:.7},{speed:.3}", p.1, p.2)
+            }
+            _ => ",,".into(),
+        };
+        csv.push_str(&format!("{t:.2},0,0,{:.4},{fix}\n", yaw_dps(t)));
+    }
+    csv
+}
+
+/// A bike computer's wheel-speed sensor as the odometer of a log without
+/// one (`--wheel ride.fit`): the Edge 810's distance matched to a ride log
+/// of five minutes of its own track by UTC. Every row's distance is the
+/// FIT's at that second; the fit takes the wheel's metres for the track's
+/// (gain near 1) and follows the fixes; a ride that starts before the FIT's
+/// distance is cut to it, with a warning; a ride without a UTC start, or
+/// one from another day, is a clear error naming the FIT.
+#[test]
+fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
+    use gyropath::optimisation::{FitSettings, Reconstruction};
+    let path = formats().join("fit/Edge810-Vector-2013-08-16-15-35-10.fit");
+    let fit = gyropath::import::fit::parse(&std::fs::read(&path).expect("read"), "edge.fit")
+        .expect("fit");
+    assert!(fit.wheel_sensor && fit.odometer.len() > 4000);
+    let dir = std::env::temp_dir().join(format!("gyropath-wheel-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let ride = dir.join("camera.csv");
+    std::fs::write(&ride, ride_along(&fit, 1200.0, 1500.0, 0.0)).expect("write");
+    let options = ImportOptions {
+        wheel: Some(path.clone()),
+        ..ImportOptions::default()
+    };
+    let im = gyropath::pipeline::open(&ride, &options).expect("open with the wheel");
+    let log = &im.log;
+    let odo = log.odo_m.as_ref().expect("an odometer");
+    let t0 = fit.track.t_s[0] + 1200.0;
+    // At the rows on a record's second, the record's distance.
+    for &(t, d) in fit
+        .odometer
+        .iter()
+        .filter(|r| (t0 + 5.0..t0 + 295.0).contains(&r.0))
+    {
+        let j = log.t_s.partition_point(|&x| x < t - t0 - 0.001);
+        assert!((odo[j].expect("distance") - d).abs() < 1e-6, "{t}: {odo:?}");
+    }
+    assert!(
+        log.warnings
+            .iter()
+            .any(|w| w.contains("wheel-speed sensor's")),
+        "{:?}",
+        log.warnings
+    );
+    let sig = std::sync::Arc::new(gyropath::signals::Signals::from_log(log).expect("signals"));
+    let said = sig.odometer.describe();
+    assert!(
+        said.contains("wheel-speed sensor") && said.contains("Edge810"),
+        "{said}"
+    );
+    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    rec.finish();
+    let gain = rec
+        .model()
+        .effect_params(rec.params(), "odometer_gain")
+        .expect("gain")[0];
+    let rms = rec.stats().rms_horizontal_m;
+    println!("Edge 810, 5 minutes: gain {gain:.4}, path {rms:.2} m from the fixes");
+    assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
+    assert!(rms < 5.0, "{rms} m from the fixes");
+
+    // A ride that starts 20 s before the FIT's distance: cut, with a warning.
+    std::fs::write(&ride, ride_along(&fit, 0.0, 120.0, -20.0)).expect("write");
+    let im = gyropath::pipeline::open(&ride, &options).expect("open, cut");
+    assert!(im.log.t_s[0] >= 19.9, "{}", im.log.t_s[0]);
+    assert!(
+        im.log.warnings.iter().any(|w| w.contains("is cut to")),
+        "{:?}",
+        im.log.warnings
+    );
+    // From another day, and without a UTC start: errors naming the FIT.
+    std::fs::write(&ride, ride_along(&fit, 0.0, 120.0, 86_400.0)).expect("write");
+    let e = gyropath::pipeline::open(&ride, &options)
+        .expect_err("another day")
+        .to_string();
+    assert!(
+        e.starts_with(&path.display().to_string()) && e.contains("same ride"),
+        "{e}"
+    );
+    let text = ride_along(&fit, 0.0, 120.0, 0.0);
+    std::fs::write(&ride, text.lines().skip(1).collect::<Vec<_>>().join("\n")).expect("write");
+    let e = gyropath::pipeline::open(&ride, &options)
+        .expect_err("no t0_unix_s")
+        .to_string();
+    assert!(e.contains("t0_unix_s"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

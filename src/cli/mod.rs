@@ -135,6 +135,12 @@ pub struct SourceArgs {
     /// `gnss` (the GNSS speed, leaving the log's odometer out).
     #[arg(long, default_value = "auto")]
     pub distance: String,
+    /// A Garmin FIT activity (a bike computer's) whose distance, its
+    /// wheel-speed sensor's, is the ride's odometer, matched by UTC: for a
+    /// camera, phone or drone log without a wheel sensor. The ride is cut to
+    /// the time the FIT covers.
+    #[arg(long)]
+    pub wheel: Option<PathBuf>,
 }
 
 impl SourceArgs {
@@ -162,6 +168,7 @@ impl SourceArgs {
                 .distance
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--distance: {e}"))?,
+            wheel: self.wheel.clone(),
         })
     }
 }

@@ -13,6 +13,13 @@
 //! (`antplus_device_type` or `device_type` `bike_speed` or
 //! `bike_speed_cadence`, 121 or 123): the FIT `speed` field does not say
 //! whether the GNSS or the wheel measured it.
+//!
+//! A bike computer's wheel-speed sensor is the odometer that a camera, a
+//! phone or a drone log lacks: `--wheel ride.fit` (see [`merge_distance`])
+//! takes the FIT's cumulative `distance` as the ride's odometer, matched by
+//! UTC time.
+
+use std::path::Path;
 
 use fitparser::profile::MesgNum;
 use fitparser::{FitDataRecord, Value};
@@ -20,6 +27,7 @@ use fitparser::{FitDataRecord, Value};
 use super::LoadError;
 use super::reference::{Clock, ReferenceTrack};
 use crate::geodesy::Geodetic;
+use crate::ride::RideLog;
 
 /// Whether the first bytes of a file are a FIT header (`.FIT` at byte 8).
 pub fn is_fit(head: &[u8]) -> bool {
@@ -32,6 +40,10 @@ pub struct Activity {
     pub track: ReferenceTrack,
     /// The device's last `distance` (m), where it logs one.
     pub distance_m: Option<f64>,
+    /// The cumulative `distance` (m) of every record that logs one, by its
+    /// time (s since 1970, UTC; increasing): the wheel-speed sensor's where
+    /// one is paired, else the device's GNSS track's.
+    pub odometer: Vec<(f64, f64)>,
     /// Whether a wheel-speed sensor was paired.
     pub wheel_sensor: bool,
     /// The device's product name, where it says it.
@@ -90,6 +102,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
     };
     let mut track = ReferenceTrack::empty(file, Clock::Unix);
     let mut distance_m = None;
+    let mut odometer: Vec<(f64, f64)> = Vec::new();
     let mut wheel_sensor = false;
     let mut device = None;
     const SEMICIRCLE_DEG: f64 = 180.0 / 2_147_483_648.0;
@@ -98,6 +111,12 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
             MesgNum::Record => {
                 if let Some(d) = field(r, "distance").and_then(number) {
                     distance_m = Some(d);
+                    if let Some(Value::Timestamp(time)) = field(r, "timestamp") {
+                        let t = time.timestamp() as f64;
+                        if odometer.last().is_none_or(|&(last, _)| t > last) {
+                            odometer.push((t, d));
+                        }
+                    }
                 }
                 let (Some(lat), Some(lon), Some(Value::Timestamp(time))) = (
                     field(r, "position_lat").and_then(number),
@@ -152,7 +171,118 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
     Ok(Activity {
         track,
         distance_m,
+        odometer,
         wheel_sensor,
         device,
     })
+}
+
+/// Shortest stretch (s) that a FIT's distance and a ride must share.
+const MIN_OVERLAP_S: f64 = 10.0;
+
+/// Take the cumulative `distance` of the FIT activity at `path` as `log`'s
+/// odometer (`odo_m`, in place of any wheel sensor or speed it has),
+/// matched by UTC: row `j` is at `t0_unix_s + t_j`, and its distance is
+/// the FIT's interpolated linearly between its records (whole seconds,
+/// usually 1 Hz). Where the FIT covers only part of the ride, the ride is
+/// cut to that part (a path does not stand still where no distance is
+/// known). Errors: a ride without `t0_unix_s`, a FIT without distances, or
+/// less than [`MIN_OVERLAP_S`] in common. Without a paired wheel-speed
+/// sensor the FIT's distance is its own GNSS track's: taken, with a warning.
+pub fn merge_distance(log: &mut RideLog, path: &Path) -> Result<(), LoadError> {
+    let (bytes, file) = super::read_bytes(path)?;
+    let activity = parse(&bytes, &file)?;
+    let error = |message: String| LoadError::File {
+        file: file.clone(),
+        message,
+    };
+    let odometer = &activity.odometer;
+    let (Some(&(first, _)), Some(&(last, _))) = (odometer.first(), odometer.last()) else {
+        return Err(error("the FIT file logs no distance".into()));
+    };
+    if odometer.len() < 2 {
+        return Err(error(
+            "the FIT file logs one distance: at least two are needed".into(),
+        ));
+    }
+    let t0 = log
+        .metadata
+        .get("t0_unix_s")
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .ok_or_else(|| {
+            error(format!(
+                "{} has no t0_unix_s (its start in UTC), so the FIT's distance cannot be matched to it by time",
+                log.source
+            ))
+        })?;
+    let (Some(&ride_first), Some(&ride_last)) = (log.t_s.first(), log.t_s.last()) else {
+        return Err(error(format!("{} has no rows", log.source)));
+    };
+    let (start, end) = ((first - t0).max(ride_first), (last - t0).min(ride_last));
+    if end - start < MIN_OVERLAP_S {
+        return Err(error(format!(
+            "its distance ({first:.0}-{last:.0} s UTC) and {} ({:.0}-{:.0} s UTC) share {:.0} s; at least {MIN_OVERLAP_S:.0} s are needed: is it the same ride?",
+            log.source,
+            t0 + ride_first,
+            t0 + ride_last,
+            (end - start).max(0.0)
+        )));
+    }
+    let rows = log.t_s.partition_point(|&t| t < start)..log.t_s.partition_point(|&t| t <= end);
+    if rows.len() < log.len() {
+        log.warnings.push(format!(
+            "{}: {file}'s distance covers {:.0} s of the ride's {:.0} s: the ride is cut to {start:.1}-{end:.1} s",
+            log.source,
+            end - start,
+            ride_last - ride_first
+        ));
+        log.keep_rows(rows);
+    }
+    let mut k = 0;
+    let distance = log
+        .t_s
+        .iter()
+        .map(|&t| {
+            let utc = t0 + t;
+            while k + 2 < odometer.len() && odometer[k + 1].0 < utc {
+                k += 1;
+            }
+            let ((ta, da), (tb, db)) = (odometer[k], odometer[k + 1]);
+            Some(da + (db - da) * ((utc - ta) / (tb - ta)).clamp(0.0, 1.0))
+        })
+        .collect();
+    if log.odo_m.is_some() || log.wheel_pulse.is_some() || log.speed_mps.is_some() {
+        log.warnings.push(format!(
+            "{}: its own odometer is replaced by {file}'s distance",
+            log.source
+        ));
+    }
+    log.odo_m = Some(distance);
+    log.wheel_pulse = None;
+    log.speed_mps = None;
+    log.warnings.push(if activity.wheel_sensor {
+        format!(
+            "{}: the distance is {file}'s wheel-speed sensor's ({} records), matched by UTC",
+            log.source,
+            odometer.len()
+        )
+    } else {
+        format!(
+            "{}: the distance is {file}'s, which has no wheel-speed sensor paired: it is the bike computer's GNSS distance ({} records), matched by UTC",
+            log.source,
+            odometer.len()
+        )
+    });
+    log.metadata.insert(
+        "odometer".into(),
+        format!(
+            "{} of {file}, matched by UTC",
+            if activity.wheel_sensor {
+                "the wheel-speed sensor's distance"
+            } else {
+                "the GNSS distance"
+            }
+        ),
+    );
+    Ok(())
 }

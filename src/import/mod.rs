@@ -182,6 +182,9 @@ pub struct ImportOptions {
     pub attitude: Option<String>,
     /// Where the distance comes from.
     pub distance: DistanceChoice,
+    /// A Garmin FIT activity whose distance (its wheel-speed sensor's)
+    /// becomes the ride's odometer, matched by UTC ([`fit::merge_distance`]).
+    pub wheel: Option<PathBuf>,
 }
 
 /// Where a ride's distance comes from.
@@ -395,6 +398,15 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
         SourceKind::GnssLogger => (gnsslogger::read(path)?, None),
         SourceKind::DataFlash => (dataflash::read(path)?, None),
     };
+    if let Some(wheel) = &options.wheel {
+        if options.distance == DistanceChoice::Gnss {
+            return Err(LoadError::File {
+                file: wheel.display().to_string(),
+                message: "a wheel distance and --distance gnss exclude each other".into(),
+            });
+        }
+        fit::merge_distance(&mut log, wheel)?;
+    }
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;
     }
