@@ -6,6 +6,8 @@ use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use gyropath::app::{AppSettings, GyropathApp, sample_ride};
 
+mod common;
+
 fn harness(app: GyropathApp) -> Harness<'static, GyropathApp> {
     Harness::builder()
         .with_size(egui::vec2(1280.0, 800.0))
@@ -646,4 +648,52 @@ fn a_comma_segment_opens_and_its_distance_can_come_from_the_gnss_speed() {
         "reloaded with the GNSS speed"
     );
     h.get_by_label_contains("from the GNSS speed, integrated (no wheel sensor; 577 samples");
+}
+
+/// A log without a wheel sensor takes a bike computer's wheel distance from
+/// the Source panel: "Wheel distance (FIT)..." (its file dialog's pick
+/// stood in for here) reloads the ride with the Edge 810's distance as its
+/// odometer, matched by UTC, and the panel names it; "Remove" reloads the
+/// ride on its own GNSS speed.
+#[test]
+fn a_wheel_distance_from_a_fit_file_is_picked_in_the_source_panel_and_removed() {
+    let fit_path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/formats/fit/Edge810-Vector-2013-08-16-15-35-10.fit");
+    let fit = gyropath::import::fit::parse(&std::fs::read(&fit_path).expect("read"), "edge.fit")
+        .expect("fit");
+    let dir = tempfile::tempdir().expect("temp dir");
+    let ride = dir.path().join("camera.csv");
+    std::fs::write(&ride, common::ride_along(&fit, 1200.0, 1320.0, 0.0)).expect("write");
+    let app = GyropathApp::new(
+        manual_settings(),
+        gyropath::app::worker::RideSource::file(ride.clone()),
+        || {},
+    );
+    let mut h = harness(app);
+    let loaded = |h: &mut Harness<'static, GyropathApp>, what: &str| {
+        let what = what.to_string();
+        assert!(
+            step_until(h, Duration::from_secs(60), |a| a
+                .ride
+                .as_ref()
+                .is_some_and(|r| r.distance.contains(&what) && a.loading.is_none())),
+            "not loaded with '{what}': error {:?}",
+            h.state().error
+        );
+    };
+    loaded(&mut h, "GNSS speed");
+    h.get_by_label("Wheel distance (FIT)...");
+    let picked = h
+        .state()
+        .ride
+        .as_ref()
+        .and_then(|r| r.source.with_wheel(fit_path.clone()))
+        .expect("a file source");
+    h.state_mut().apply(gyropath::app::Command::Open(picked));
+    loaded(&mut h, "wheel-speed sensor");
+    h.get_by_label_contains("wheel: Edge810");
+    h.get_by_label_contains("distance: the wheel-speed sensor's distance of");
+    h.get_by_label("Remove").click();
+    loaded(&mut h, "GNSS speed");
+    h.get_by_label("Wheel distance (FIT)...");
 }

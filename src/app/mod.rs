@@ -106,6 +106,9 @@ pub enum Command {
     PickReference,
     /// Measure the fit against this reference track.
     OpenReference(PathBuf),
+    /// Pick a bike computer's activity (Garmin FIT) whose wheel distance
+    /// becomes the loaded ride's odometer.
+    PickWheel,
 }
 
 /// One row of the model history: a finished fit of one model.
@@ -130,6 +133,7 @@ pub struct HistoryRow {
 enum Picked {
     Ride(PathBuf),
     Reference(PathBuf),
+    Wheel(PathBuf),
     Export(ExportKind, PathBuf),
 }
 
@@ -332,6 +336,12 @@ impl GyropathApp {
             match p {
                 Picked::Ride(path) => self.apply(Command::Open(RideSource::file(path))),
                 Picked::Reference(path) => self.apply(Command::OpenReference(path)),
+                Picked::Wheel(fit) => {
+                    if let Some(reload) = self.ride.as_ref().and_then(|r| r.source.with_wheel(fit))
+                    {
+                        self.apply(Command::Open(reload));
+                    }
+                }
                 Picked::Export(kind, path) => self.export_to(kind, path),
             }
         }
@@ -446,6 +456,17 @@ impl GyropathApp {
                 });
             }
             Command::OpenReference(path) => self.worker.send(Request::LoadReference(path)),
+            Command::PickWheel => {
+                let tx = self.picked_tx.clone();
+                spawn_dialog(move || {
+                    if let Some(p) = rfd::FileDialog::new()
+                        .add_filter("bike computer activity (Garmin FIT)", &["fit"])
+                        .pick_file()
+                    {
+                        let _ = tx.send(Picked::Wheel(p));
+                    }
+                });
+            }
             Command::Run => self.worker.send(Request::Run),
             Command::Pause => self.worker.send(Request::Pause),
             Command::Step => self.worker.send(Request::Step),

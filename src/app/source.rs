@@ -118,12 +118,51 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
     .response
     .on_hover_text(ride.attitude.describe());
     ui.small(ride.attitude.describe());
-    if ride.has_gnss_speed {
+    if ride.has_gnss_speed && options.wheel.is_none() {
         distance_ui(ui, ride, path, options, commands);
     } else {
         ui.label(format!("distance: {}", ride.distance));
     }
+    wheel_ui(ui, path, options, commands);
     checks_ui(ui, ride);
+}
+
+/// A bike computer's wheel distance (a Garmin FIT activity's, matched by
+/// UTC) as the odometer of a log without a wheel sensor: pick one, or take
+/// the log's own distance again.
+fn wheel_ui(
+    ui: &mut egui::Ui,
+    path: &std::path::Path,
+    options: &ImportOptions,
+    commands: &mut Vec<Command>,
+) {
+    ui.horizontal(|ui| match &options.wheel {
+        Some(fit) => {
+            ui.label(format!(
+                "wheel: {}",
+                fit.file_name()
+                    .map_or_else(|| fit.display().to_string(), |n| n.to_string_lossy().into_owned())
+            ));
+            if ui
+                .button("Remove")
+                .on_hover_text("Take the distance from the log itself again")
+                .clicked()
+            {
+                commands.push(reload(path, options, |o| o.wheel = None));
+            }
+        }
+        None => {
+            if ui
+                .button("Wheel distance (FIT)...")
+                .on_hover_text(
+                    "A bike computer's wheel-speed sensor (its Garmin FIT activity) as the odometer, matched by UTC; the ride is cut to the time it covers",
+                )
+                .clicked()
+            {
+                commands.push(Command::PickWheel);
+            }
+        }
+    });
 }
 
 /// Where the distance comes from, for a log that has the GNSS speed: its

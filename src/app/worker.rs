@@ -51,6 +51,19 @@ impl RideSource {
             Self::Bytes { name, .. } => name.clone(),
         }
     }
+
+    /// The same file read again with `fit`'s wheel distance as its odometer
+    /// (the distance choice back to auto, which a wheel distance needs);
+    /// `None` for bytes in memory, which have no UTC start to match by.
+    pub fn with_wheel(&self, fit: PathBuf) -> Option<Self> {
+        let Self::Path(path, options) = self else {
+            return None;
+        };
+        let mut options = options.clone();
+        options.wheel = Some(fit);
+        options.distance = crate::import::DistanceChoice::Auto;
+        Some(Self::Path(path.clone(), options))
+    }
 }
 
 /// What the worker can export.
