@@ -46,14 +46,10 @@ pub struct RideLog {
 }
 
 impl RideLog {
-    /// Give back the columns' growth slack (up to half of a long log's
-    /// memory) before the signals are derived from them.
-    pub(crate) fn shrink_to_fit(&mut self) {
-        self.line.shrink_to_fit();
-        self.t_s.shrink_to_fit();
-        self.gyro_dps.shrink_to_fit();
-        self.fix.shrink_to_fit();
-        for c in [
+    /// The optional number columns that a log has, for what is done to
+    /// every column alike.
+    fn number_columns_mut(&mut self) -> impl Iterator<Item = &mut Vec<Option<f64>>> {
+        [
             &mut self.odo_m,
             &mut self.speed_mps,
             &mut self.gps_alt_m,
@@ -65,7 +61,16 @@ impl RideLog {
         ]
         .into_iter()
         .flatten()
-        {
+    }
+
+    /// Give back the columns' growth slack (up to half of a long log's
+    /// memory) before the signals are derived from them.
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.line.shrink_to_fit();
+        self.t_s.shrink_to_fit();
+        self.gyro_dps.shrink_to_fit();
+        self.fix.shrink_to_fit();
+        for c in self.number_columns_mut() {
             c.shrink_to_fit();
         }
         if let Some(p) = &mut self.wheel_pulse {
@@ -91,19 +96,7 @@ impl RideLog {
         cut(&mut self.t_s, &rows);
         cut(&mut self.gyro_dps, &rows);
         cut(&mut self.fix, &rows);
-        for c in [
-            &mut self.odo_m,
-            &mut self.speed_mps,
-            &mut self.gps_alt_m,
-            &mut self.gps_speed_mps,
-            &mut self.gps_course_deg,
-            &mut self.gps_hacc_m,
-            &mut self.gps_vacc_m,
-            &mut self.baro_alt_m,
-        ]
-        .into_iter()
-        .flatten()
-        {
+        for c in self.number_columns_mut() {
             cut(c, &rows);
         }
         if let Some(p) = &mut self.wheel_pulse {
@@ -142,5 +135,33 @@ impl RideLog {
     /// Number of GPS fixes.
     pub fn fix_count(&self) -> usize {
         self.fix.iter().filter(|f| f.is_some()).count()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Every column keeps the same rows, with their values and times.
+    #[test]
+    fn keep_rows_cuts_every_column_alike() {
+        let mut log = crate::testing::winding_log(10.0, 10.0);
+        log.accel_mps2 = Some((0..log.len()).map(|j| Some([j as f64; 3])).collect());
+        log.wheel_pulse = Some((0..log.len()).map(|j| j % 7 == 0).collect());
+        let before = log.clone();
+        log.keep_rows(20..60);
+        assert_eq!(log.len(), 40);
+        assert_eq!(log.t_s[..], before.t_s[20..60]);
+        assert_eq!(log.line[..], before.line[20..60]);
+        assert_eq!(log.gyro_dps[..], before.gyro_dps[20..60]);
+        assert_eq!(log.fix[..], before.fix[20..60]);
+        let (odo, was) = (log.odo_m.as_ref().unwrap(), before.odo_m.as_ref().unwrap());
+        assert_eq!(odo[..], was[20..60]);
+        assert_eq!(log.baro_alt_m.as_ref().unwrap().len(), 40);
+        assert_eq!(log.gps_alt_m.as_ref().unwrap().len(), 40);
+        assert_eq!(log.accel_mps2.as_ref().unwrap()[0], Some([20.0; 3]));
+        assert_eq!(log.wheel_pulse.as_ref().unwrap().len(), 40);
+        assert!(log.channels.iter().all(|(_, c)| c.len() == 40));
+        log.keep_rows(30..100);
+        assert_eq!(log.len(), 10);
+        assert_eq!(log.t_s[0], before.t_s[50]);
     }
 }
