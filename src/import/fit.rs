@@ -180,6 +180,10 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
 /// Shortest stretch (s) that a FIT's distance and a ride must share.
 const MIN_OVERLAP_S: f64 = 10.0;
 
+/// Longest time (s) between a FIT's records that is not a pause: smart
+/// recording logs every 1-8 s.
+const MAX_RECORD_GAP_S: f64 = 10.0;
+
 /// Take the cumulative `distance` of the FIT activity at `path` as `log`'s
 /// odometer (`odo_m`, in place of any wheel sensor or speed it has),
 /// matched by UTC: row `j` is at `t0_unix_s + t_j`, and its distance is
@@ -191,7 +195,12 @@ const MIN_OVERLAP_S: f64 = 10.0;
 /// sensor the FIT's distance is its own GNSS track's: taken, with a warning.
 pub fn merge_distance(log: &mut RideLog, path: &Path) -> Result<(), LoadError> {
     let (bytes, file) = super::read_bytes(path)?;
-    let activity = parse(&bytes, &file)?;
+    merge_activity(log, &parse(&bytes, &file)?, &file)
+}
+
+/// [`merge_distance`] of an activity read from `file` (named in messages).
+fn merge_activity(log: &mut RideLog, activity: &Activity, file: &str) -> Result<(), LoadError> {
+    let file = file.to_string();
     let error = |message: String| LoadError::File {
         file: file.clone(),
         message,
@@ -251,6 +260,21 @@ pub fn merge_distance(log: &mut RideLog, path: &Path) -> Result<(), LoadError> {
             Some(da + (db - da) * ((utc - ta) / (tb - ta)).clamp(0.0, 1.0))
         })
         .collect();
+    // Seconds the FIT logged no distance inside the ride (a pause, a lost
+    // sensor): its distance is interpolated across them.
+    let paused: Vec<f64> = odometer
+        .windows(2)
+        .filter(|w| w[1].0 > t0 + start && w[0].0 < t0 + end && w[1].0 - w[0].0 > MAX_RECORD_GAP_S)
+        .map(|w| w[1].0 - w[0].0)
+        .collect();
+    if !paused.is_empty() {
+        log.warnings.push(format!(
+            "{}: {file} logs no distance for {} stretch(es) of {:.0} s in all (paused?): the distance is interpolated across them",
+            log.source,
+            paused.len(),
+            paused.iter().sum::<f64>()
+        ));
+    }
     if log.odo_m.is_some() || log.wheel_pulse.is_some() || log.speed_mps.is_some() {
         log.warnings.push(format!(
             "{}: its own odometer is replaced by {file}'s distance",
@@ -285,4 +309,81 @@ pub fn merge_distance(log: &mut RideLog, path: &Path) -> Result<(), LoadError> {
         ),
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 60 s ride at 10 Hz starting at Unix time 1000 s, and an activity
+    /// whose distance grows 5 m a second from 990 s with a 20 s pause.
+    fn ride_and_activity() -> (RideLog, Activity) {
+        let mut log = crate::testing::winding_log(60.0, 10.0);
+        log.metadata.insert("t0_unix_s".into(), "1000".into());
+        let mut odometer: Vec<(f64, f64)> = (990..=1020)
+            .map(|t| (t as f64, 5.0 * (t - 990) as f64))
+            .collect();
+        // Paused from 1020 s to 1040 s (the bike stood): no records, no distance.
+        odometer.extend((1040..=1100).map(|t| (t as f64, 150.0 + 5.0 * (t - 1040) as f64)));
+        let activity = Activity {
+            track: ReferenceTrack::empty("a.fit", Clock::Unix),
+            distance_m: odometer.last().map(|r| r.1),
+            odometer,
+            wheel_sensor: true,
+            device: None,
+        };
+        (log, activity)
+    }
+
+    #[test]
+    fn each_row_takes_the_fits_distance_at_its_utc_time() {
+        let (mut log, activity) = ride_and_activity();
+        merge_activity(&mut log, &activity, "a.fit").unwrap();
+        let odo = log.odo_m.as_ref().unwrap();
+        let at = |t: f64| odo[log.t_s.partition_point(|&x| x < t - 1e-9)].unwrap();
+        assert!((at(0.0) - 50.0).abs() < 1e-9);
+        assert!((at(12.5) - 112.5).abs() < 1e-9);
+        // Across the pause the distance is interpolated, and a warning says so.
+        assert!((at(30.0) - 150.0).abs() < 1e-9);
+        assert!((at(45.0) - 175.0).abs() < 1e-9);
+        assert!(log.wheel_pulse.is_none() && log.speed_mps.is_none());
+        assert!(
+            log.warnings
+                .iter()
+                .any(|w| w.contains("1 stretch(es) of 20 s")),
+            "{:?}",
+            log.warnings
+        );
+        assert!(
+            log.warnings
+                .iter()
+                .any(|w| w.contains("its own odometer is replaced"))
+        );
+    }
+
+    #[test]
+    fn a_ride_the_fit_covers_in_part_is_cut_to_it() {
+        let (mut log, mut activity) = ride_and_activity();
+        activity.odometer.retain(|r| r.0 >= 1010.0);
+        merge_activity(&mut log, &activity, "a.fit").unwrap();
+        assert!((log.t_s[0] - 10.0).abs() < 1e-9, "{}", log.t_s[0]);
+        assert!(
+            log.warnings
+                .iter()
+                .any(|w| w.contains("is cut to 10.0-60.0 s"))
+        );
+        // Under 10 s in common, and no UTC start: errors naming the FIT.
+        let (mut log, mut activity) = ride_and_activity();
+        activity.odometer.retain(|r| r.0 >= 1055.0);
+        let e = merge_activity(&mut log, &activity, "a.fit")
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("a.fit: ") && e.contains("share 5 s"), "{e}");
+        let (mut log, activity) = ride_and_activity();
+        log.metadata.remove("t0_unix_s");
+        let e = merge_activity(&mut log, &activity, "a.fit")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("no t0_unix_s"), "{e}");
+    }
 }
