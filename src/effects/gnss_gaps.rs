@@ -71,8 +71,9 @@ pub struct GnssGaps {
     lengths: Vec<f64>,
     /// Per step: the gap it lies in and its weight `dt_j / T_g`, if any.
     step: Vec<Option<(usize, f64)>>,
-    /// Per step in a gap: the spread of the distance inside it (m^2).
-    variance: Vec<f64>,
+    /// Per step in a gap: the spread of the distance inside it (m^2), the
+    /// signals' own (computed once per ride, see `Signals::gap_spread`).
+    variance: std::sync::Arc<[f64]>,
 }
 
 /// The intensity `q` (m^2/s^3) of the speed's changes: the mean square of
@@ -252,22 +253,28 @@ impl GnssGaps {
                 step[j] = Some((g, signals.dt[j] / length));
             }
         }
-        let q = speed_intensity(signals, &step);
-        let ride = Travelled::new(signals);
-        let spreads: Vec<Option<Vec<f64>>> = lengths
-            .iter()
-            .map(|&length| ride.bridge_spread(length, gaps))
-            .collect();
-        let mut variance = vec![0.0; n];
-        for (j, v) in variance.iter_mut().enumerate() {
-            if let Some((g, _)) = step[j] {
-                let (length, tau) = (lengths[g], signals.t[j] - gaps[g].0);
-                *v = match &spreads[g] {
-                    Some(table) => interpolate(table, tau / length),
-                    None => brownian_bridge(q, length, tau),
-                };
-            }
-        }
+        let variance = signals
+            .gap_spread
+            .get_or_init(|| {
+                let q = speed_intensity(signals, &step);
+                let ride = Travelled::new(signals);
+                let spreads: Vec<Option<Vec<f64>>> = lengths
+                    .iter()
+                    .map(|&length| ride.bridge_spread(length, gaps))
+                    .collect();
+                let mut variance = vec![0.0; n];
+                for (j, v) in variance.iter_mut().enumerate() {
+                    if let Some((g, _)) = step[j] {
+                        let (length, tau) = (lengths[g], signals.t[j] - gaps[g].0);
+                        *v = match &spreads[g] {
+                            Some(table) => interpolate(table, tau / length),
+                            None => brownian_bridge(q, length, tau),
+                        };
+                    }
+                }
+                variance.into()
+            })
+            .clone();
         Ok(Self {
             lengths,
             step,
