@@ -162,9 +162,7 @@ impl CovWalk {
     ) -> Option<()> {
         let m = new.len();
         let rest_idx: Vec<usize> = rest.iter().map(|&v| self.index(v)).collect::<Option<_>>()?;
-        let rbb_inv = rows
-            .view((0, 0), (m, m))
-            .into_owned()
+        let rbb_inv = super::forward::block(rows, (0, 0), (m, m))
             .solve_upper_triangular(&DMatrix::identity(m, m))?;
         let g = -(&rbb_inv * rows.view((0, m), (m, rest.len())));
         let (n, k) = self.l.shape();
@@ -240,10 +238,7 @@ impl ChainSystem {
         let lin = &self.lin;
         let blocks = &lin.blocks;
         let n = f.rows.nrows();
-        let rinv = f
-            .rows
-            .view((0, 0), (n, n))
-            .into_owned()
+        let rinv = super::forward::block(&f.rows, (0, 0), (n, n))
             .solve_upper_triangular(&DMatrix::identity(n, n))?;
         let mut walk = CovWalk {
             labels: Vec::with_capacity(n),
