@@ -15,6 +15,7 @@
 //! - [`report`]: the self-contained HTML report of a fit (and a batch's index page).
 //! - `app` (feature `app`, on by default): the eframe desktop app; draws what the core computes.
 //! - [`simulation`]: a bicycle-ride simulator with its own physics, for tests and sample data.
+//! - [`standing`]: stands inside GNSS-speed gaps, told by the gyro's shaking.
 //! - [`statistics`]: order statistics (the median) that the modules above share.
 
 // Index loops over rows and axes read like the equations they implement.
@@ -38,6 +39,7 @@ pub mod ride;
 pub mod rotation;
 pub mod signals;
 pub mod simulation;
+pub mod standing;
 pub mod statistics;
 
 #[cfg(test)]

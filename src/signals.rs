@@ -233,6 +233,10 @@ pub enum Odometer {
         /// Stretches with no speed sample for longer than [`GNSS_SPEED_GAP_S`]
         /// (start, end in s): their distance is interpolated, not measured.
         gaps: Vec<(f64, f64)>,
+        /// Stands found inside the gaps by the gyro (start, end in s).
+        stands_in_gaps: Vec<(f64, f64)>,
+        /// How the ride's gyro tells a stand; `None` where it cannot.
+        stand_rule: Option<crate::standing::StandRule>,
     },
 }
 
@@ -251,6 +255,8 @@ impl Odometer {
                 samples,
                 standing_s,
                 gaps,
+                stands_in_gaps,
+                ..
             } => {
                 let mut s = format!(
                     "the GNSS speed, integrated (no wheel sensor; {samples} samples, {standing_s:.0} s standing"
@@ -260,6 +266,12 @@ impl Odometer {
                     s.push_str(&format!(
                         ", {} gaps of {total:.0} s interpolated",
                         gaps.len()
+                    ));
+                }
+                if !stands_in_gaps.is_empty() {
+                    let total: f64 = stands_in_gaps.iter().map(|(a, b)| b - a).sum();
+                    s.push_str(&format!(
+                        ", {total:.0} s of them standing by the gyro's shaking"
                     ));
                 }
                 s.push(')');
@@ -343,6 +355,9 @@ impl Signals {
         };
         let (mut gyro, gaps) = step_rates(raw, &dt, instantaneous);
         let attitude = choose_attitude(log, &t, &gyro).map_err(&unusable)?;
+        // The distance's standing rule and a gap's stands read the rates
+        // as logged, before a planar ride's roll and pitch are set aside.
+        let (distance, odometer) = odometer_distance(log, |j| gyro[j].map(f64::to_degrees).into())?;
         if attitude.is_planar() {
             for w in &mut gyro {
                 w.x = 0.0;
@@ -360,7 +375,6 @@ impl Signals {
             ));
         }
 
-        let (distance, odometer) = odometer_distance(log, |j| gyro[j].norm().to_degrees())?;
         let time = |key: &str, what: &str| -> Result<Option<f64>, SignalError> {
             match log.metadata.get(key).map(|v| v.trim()) {
                 None => Ok(None),
@@ -467,11 +481,12 @@ pub fn turn_rate_dps(g: &[f64; 3]) -> f64 {
 
 /// Per-step odometer distance of a log, from whichever odometer it has
 /// (cumulative distance, then speed, then wheel pulses, then the GNSS speed,
-/// which also needs `turn_dps`, the turn rate of row `j` in deg/s, to tell
-/// a stop; asked only there, so no other log pays for it), and which it was.
+/// which also needs `rate_dps`, the gyro's rates at row `j` in deg/s as
+/// logged, to tell a stop; asked only there, so no other log pays for it),
+/// and which it was.
 pub fn odometer_distance(
     log: &RideLog,
-    turn_dps: impl Fn(usize) -> f64,
+    rate_dps: impl Fn(usize) -> [f64; 3],
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     if let Some(odo) = &log.odo_m {
         let kind = match log.metadata.get("odometer") {
@@ -498,7 +513,7 @@ pub fn odometer_distance(
             },
         ))
     } else if let Some(speed) = &log.gps_speed_mps {
-        distance_from_gnss_speed(speed, log, turn_dps)
+        distance_from_gnss_speed(speed, log, rate_dps)
     } else {
         Err(SignalError::Unusable {
             file: log.source.clone(),
@@ -543,10 +558,13 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 /// Gaps longer than [`GNSS_SPEED_GAP_S`] are bridged the same way and
 /// listed: there the distance is a guess the fit's gain cannot correct, so
 /// each gap's distance is a parameter of the fit (`effects::GnssGaps`).
+/// Inside a gap, where the gyro's shaking says the vehicle stood (see
+/// [`crate::standing`]), the speed is zero, and interpolated between the
+/// gap's ends and the stand's.
 pub fn distance_from_gnss_speed(
     speed: &[Option<f64>],
     log: &RideLog,
-    turn_dps: impl Fn(usize) -> f64,
+    rate_dps: impl Fn(usize) -> [f64; 3],
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
     let samples: Vec<usize> = (0..speed.len()).filter(|&i| speed[i].is_some()).collect();
     if samples.len() < 2 {
@@ -560,7 +578,6 @@ pub fn distance_from_gnss_speed(
             ),
         });
     }
-    let v = fill_gaps(speed);
     let t = &log.t_s;
     let mut gaps = Vec::new();
     for w in samples.windows(2) {
@@ -569,12 +586,59 @@ pub fn distance_from_gnss_speed(
             gaps.push((a, b));
         }
     }
-    let still = |j: usize| turn_dps(j) < STANDING_RATE_DPS;
+    let mut v = fill_gaps(speed);
+    let mut stands_in_gaps = Vec::new();
+    let mut stand_rule = None;
+    if !gaps.is_empty() {
+        let activity = crate::standing::activity(t, &rate_dps);
+        let mut in_gap = vec![false; t.len()];
+        for &(a, b) in &gaps {
+            let (first, end) = (
+                t.partition_point(|&x| x <= a),
+                t.partition_point(|&x| x < b),
+            );
+            in_gap[first..end].fill(true);
+        }
+        stand_rule = crate::standing::stand_rule(t, &v, &activity, &in_gap);
+        if let Some(rule) = &stand_rule {
+            let rows = crate::standing::stands_in_gaps(t, &activity, &gaps, rule);
+            if !rows.is_empty() {
+                let ramps = crate::standing::ramps(t, &v, &in_gap);
+                let mut known = speed.to_vec();
+                for &(first, last) in &rows {
+                    known[first..=last].fill(Some(0.0));
+                    stands_in_gaps.push((t[first], t[last]));
+                }
+                for w in samples.windows(2) {
+                    let (a, b) = (t[w[0]], t[w[1]]);
+                    let inside: Vec<(f64, f64)> = stands_in_gaps
+                        .iter()
+                        .copied()
+                        .filter(|&(s, e)| s > a && e < b)
+                        .collect();
+                    if inside.is_empty() {
+                        continue;
+                    }
+                    let knots =
+                        crate::standing::gap_knots((a, v[w[0]]), (b, v[w[1]]), &inside, ramps);
+                    for (x, speed) in knots {
+                        let j = t.partition_point(|&y| y < x);
+                        if j > w[0] && j < w[1] && known[j].is_none() {
+                            known[j] = Some(speed);
+                        }
+                    }
+                }
+                v = fill_gaps(&known);
+            }
+        }
+    }
+    let still = |j: usize| turn_rate_dps(&rate_dps(j)) < STANDING_RATE_DPS;
     let mut d = vec![0.0; v.len()];
     let mut standing_s = 0.0;
     for j in 1..v.len() {
         let dt = t[j] - t[j - 1];
-        if v[j - 1] < STANDING_SPEED_MPS && v[j] < STANDING_SPEED_MPS && still(j) {
+        let stopped = v[j - 1] == 0.0 && v[j] == 0.0;
+        if stopped || (v[j - 1] < STANDING_SPEED_MPS && v[j] < STANDING_SPEED_MPS && still(j)) {
             standing_s += dt;
         } else {
             d[j] = 0.5 * (v[j - 1] + v[j]) * dt;
@@ -586,6 +650,8 @@ pub fn distance_from_gnss_speed(
             samples: samples.len(),
             standing_s,
             gaps,
+            stands_in_gaps,
+            stand_rule,
         },
     ))
 }
@@ -953,7 +1019,7 @@ mod attitude_tests {
             })
             .collect();
         log.odo_m = Some(odo);
-        let (d, _) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
+        let (d, _) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
         assert!(d[1] > 0.0 && d[n - 2] < 0.0);
         assert!((d.iter().sum::<f64>() - (1.0 - 0.0001 * ((n - 1) % 2) as f64)).abs() < 1e-9);
         log.odo_m = None;
@@ -962,9 +1028,73 @@ mod attitude_tests {
                 .map(|j| Some(if j < n / 2 { 2.0 } else { -1.0 }))
                 .collect(),
         );
-        let (d, kind) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
+        let (d, kind) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
         assert_eq!(kind, Odometer::Speed);
         assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
+    }
+
+    /// A stand inside a gap of the GNSS speed, told by the gyro's shaking:
+    /// the rule is learnt from a logged stand (5-20 s) and the moving outside
+    /// the gap; the gap (40-70 s) stands from 50 to 60 s. The speed is held at
+    /// 5 m/s until the ride's own braking (5 m/s over the 3 s before the
+    /// logged stand) reaches the stand, and pulls away as the logged one did.
+    #[test]
+    fn a_stand_inside_a_gap_is_told_by_the_gyro() {
+        let mut log = crate::testing::winding_log(80.0, 100.0);
+        let n = log.len();
+        let stood = |x: f64| (5.0..20.0).contains(&x) || (50.0..60.0).contains(&x);
+        let speed: Vec<Option<f64>> = (0..n)
+            .map(|j| {
+                let x = log.t_s[j];
+                (j % 100 == 0 && !(40.5..70.0).contains(&x)).then_some(if stood(x) {
+                    0.0
+                } else {
+                    5.0
+                })
+            })
+            .collect();
+        log.odo_m = None;
+        log.speed_mps = None;
+        log.gps_speed_mps = Some(speed);
+        for (j, g) in log.gyro_dps.iter_mut().enumerate() {
+            let wobble = if j % 2 == 0 { 1.0 } else { -1.0 };
+            let size = if stood(log.t_s[j]) { 0.05 } else { 3.0 };
+            *g = [size * wobble, 0.0, 0.1];
+        }
+        let (d, kind) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
+        let Odometer::GnssSpeed {
+            gaps,
+            stands_in_gaps,
+            stand_rule,
+            ..
+        } = &kind
+        else {
+            panic!("{kind:?}");
+        };
+        assert_eq!(gaps, &vec![(40.0, 70.0)]);
+        assert!(stand_rule.is_some());
+        assert_eq!(stands_in_gaps.len(), 1, "{stands_in_gaps:?}");
+        let (a, b) = stands_in_gaps[0];
+        assert!(
+            (a - 50.0).abs() <= 0.5 && (b - 60.0).abs() <= 0.5,
+            "{a} {b}"
+        );
+        let across = |from: f64, to: f64| -> f64 {
+            (0..n)
+                .filter(|&j| log.t_s[j] > from && log.t_s[j] <= to)
+                .map(|j| d[j])
+                .sum()
+        };
+        assert!(across(50.6, 59.4).abs() < 1e-12);
+        // 7.5 s at 5 m/s, 3 s braking, the stand, 3 s pulling away, 7.5 s
+        // at 5 m/s: 90 m (straight across, 150 m).
+        let gap = across(40.0, 70.0);
+        assert!((gap - 90.0).abs() < 3.0, "{gap} m across the gap");
+        assert!(
+            kind.describe().contains("of them standing by the gyro"),
+            "{}",
+            kind.describe()
+        );
     }
 
     /// A log with only the receiver's speed: sparse samples are interpolated
@@ -996,11 +1126,12 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.05, -0.1, 0.2];
         }
-        let (d, kind) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
+        let (d, kind) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
         let Odometer::GnssSpeed {
             samples,
             standing_s,
             gaps,
+            ..
         } = &kind
         else {
             panic!("{kind:?}");
@@ -1024,11 +1155,11 @@ mod attitude_tests {
         for g in &mut log.gyro_dps {
             *g = [0.0, 0.0, 20.0];
         }
-        let (turning, _) = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j])).unwrap();
+        let (turning, _) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
         assert!(turning.iter().sum::<f64>() > total + 0.4);
         // One sample cannot be integrated.
         log.gps_speed_mps = Some((0..n).map(|j| (j == 3).then_some(2.0)).collect());
-        let e = odometer_distance(&log, |j| turn_rate_dps(&log.gyro_dps[j]))
+        let e = odometer_distance(&log, |j| log.gyro_dps[j])
             .unwrap_err()
             .to_string();
         assert!(

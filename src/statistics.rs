@@ -19,6 +19,17 @@ pub fn median(values: &mut [f64]) -> f64 {
     }
 }
 
+/// The `q` quantile of `values` by nearest rank (the `ceil(q n)`-th
+/// smallest); NaN for none. Reorders `values`, in O(n) by selection.
+pub fn quantile(values: &mut [f64], q: f64) -> f64 {
+    let n = values.len();
+    if n == 0 {
+        return f64::NAN;
+    }
+    let at = ((q * n as f64).ceil() as usize).clamp(1, n) - 1;
+    *values.select_nth_unstable_by(at, f64::total_cmp).1
+}
+
 /// The median of the finite values of `values` (NaN for none).
 pub fn median_of_finite(values: &[f64]) -> f64 {
     let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();

@@ -158,6 +158,7 @@ fn without_the_can_speed_the_gnss_speed_gives_the_distance() {
         samples,
         standing_s,
         gaps,
+        ..
     } = odometer
     else {
         panic!("{odometer:?}");

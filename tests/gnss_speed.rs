@@ -6,8 +6,12 @@
 //! Measured (10-minute bicycle rides, seeds 2 and 3, hidden speed lag 0.24
 //! and 0.27 s, two GPS outages of 46-92 s each): the path was 31.6 and
 //! 21.5 m from the truth with the gaps bridged by interpolation alone,
-//! 5.0 and 3.3 m with `gnss_gaps`; without outages `speed_lag` recovers the
-//! lag to 0.05 s and takes the path from 1.73 to 1.11 m (seed 1, 0.48 s).
+//! 5.0 and 3.3 m with `gnss_gaps`. Seed 2 stands 10 s at a light inside a
+//! gap; with the stand told by the gyro's shaking (`gyropath::standing`)
+//! the interpolation alone leaves 11.2 m and `gnss_gaps` 1.56 m (seed 3,
+//! no stand in its gaps, is unchanged). Without outages `speed_lag`
+//! recovers the lag to 0.05 s and takes the path from 1.73 to 1.11 m
+//! (seed 1, 0.48 s).
 
 use std::sync::Arc;
 
@@ -55,7 +59,7 @@ fn fit(sim: &SimulatedRide, sig: &Arc<Signals>, effects: &[&str]) -> (f64, Optio
 
 #[test]
 fn gnss_gaps_bridge_the_outages_of_a_gnss_speed_distance() {
-    for (seed, before) in [(2, 31.6), (3, 21.5)] {
+    for (seed, bound) in [(2, 2.5), (3, 3.5)] {
         let (sim, sig) = ride(seed, true, &["speed_lag"]);
         let Odometer::GnssSpeed { gaps, .. } = &sig.odometer else {
             unreachable!()
@@ -70,7 +74,7 @@ fn gnss_gaps_bridge_the_outages_of_a_gnss_speed_distance() {
         let (without, _, none) = fit(&sim, &sig, &["paper", "-gnss_gaps"]);
         assert_eq!(none, 0);
         println!("seed {seed}: {without:.2} m without gnss_gaps, {with:.2} m with");
-        assert!(without > 0.5 * before, "seed {seed}: {without} m without");
+        assert!(with < bound, "seed {seed}: {with} m");
         assert!(
             with < 0.25 * without,
             "seed {seed}: {with} m against {without} m"
@@ -93,13 +97,14 @@ fn speed_lag_is_recovered_and_lowers_the_error() {
 /// How often the truth lies inside the path's 95 % ellipse, inside the
 /// gaps and outside them (every 50th row of rides 2-9, 10 minutes each with
 /// 5-9 stops and two GNSS gaps of 26-60 s; the model the simulator's).
-/// Measured: 0.84 in the gaps, 0.89 outside. Before the ride's own spread
-/// (`GnssGaps::along_track_variance`, the 95th percentile of the bridge's
-/// error over the ride's stretches as long as the gap) laid along the path
-/// itself, a Brownian bridge laid along the step's direction held 0.69:
-/// a stop at a light inside a gap puts the path 20-50 m back along the road,
-/// which a Brownian speed does not expect, and round a corner that is off
-/// the road's direction at the point.
+/// Measured: 0.93 in the gaps, 0.90 outside. With the stands inside the
+/// gaps told by the gyro's shaking (`gyropath::standing`: zero speed there,
+/// the ride's own braking and pulling away either side) the path in the
+/// gaps is 4.82 m from the truth (RMS over these rows), 12.66 m with the
+/// speed interpolated straight across; the band held the truth on 0.84 of
+/// the gap rows then, and 0.69 before the ride's own spread (the 95th
+/// percentile of the bridge's error over the ride's stretches as long as
+/// the gap) was laid along the path itself.
 #[test]
 fn the_band_in_the_gaps_holds_the_truth() {
     let (mut gap_in, mut gap_n, mut out_in, mut out_n) = (0, 0, 0, 0);
@@ -129,6 +134,6 @@ fn the_band_in_the_gaps_holds_the_truth() {
     println!(
         "inside the 95 % ellipse: {gap:.2} in the gaps ({gap_n} rows), {out:.2} outside ({out_n})"
     );
-    assert!(gap >= 0.8, "{gap} in the gaps");
+    assert!((0.9..=0.97).contains(&gap), "{gap} in the gaps");
     assert!(out >= 0.85, "{out} outside");
 }

@@ -133,6 +133,8 @@ mod tests {
             samples: 40,
             standing_s: 0.0,
             gaps: Vec::new(),
+            stands_in_gaps: Vec::new(),
+            stand_rule: None,
         };
         s
     }

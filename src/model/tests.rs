@@ -71,6 +71,8 @@ fn gnss_speed_model() -> Model {
         samples: 60,
         standing_s: 0.0,
         gaps: vec![(10.0, 14.0), (30.5, 40.0)],
+        stands_in_gaps: Vec::new(),
+        stand_rule: None,
     };
     let spec = ModelSpec {
         effects: vec!["paper".into(), "speed_lag".into(), "gps_lag".into()],

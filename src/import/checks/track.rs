@@ -25,9 +25,8 @@ pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
         return Vec::new();
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
-    let dist =
-        crate::signals::odometer_distance(log, |j| crate::signals::turn_rate_dps(&log.gyro_dps[j]))
-            .map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
+    let dist = crate::signals::odometer_distance(log, |j| log.gyro_dps[j])
+        .map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
     let mut s = 0.0;
     let mut turn = [0.0; 3];
     let mut acc_sum = [0.0; 3];
