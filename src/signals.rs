@@ -534,16 +534,6 @@ fn distance_from_speed(speed: &[Option<f64>], log: &RideLog) -> Result<Vec<f64>,
     Ok(d)
 }
 
-/// A GNSS speed slower than this (m/s), on a step whose gyro turns slower
-/// than [`STANDING_RATE_DPS`], is a vehicle standing: a receiver at rest
-/// reports a few centimetres to decimetres per second of Doppler noise
-/// (u-blox: 0.05-0.2 m/s), which integrated over a stop of minutes would
-/// move the path by tens of metres. The gyro must agree, so that a vehicle
-/// turning slowly (a robot in place, a car manoeuvring) keeps its distance.
-pub const STANDING_SPEED_MPS: f64 = 0.3;
-/// See [`STANDING_SPEED_MPS`] (deg/s, the norm of the rate as logged, bias
-/// included: uncalibrated MEMS gyros are 0.1-2 deg/s off at rest).
-pub const STANDING_RATE_DPS: f64 = 3.0;
 /// Consecutive GNSS speed samples further apart than this (s) leave a gap
 /// (a receiver reports at 1-18 Hz; a missed sample or two is not a gap).
 pub const GNSS_SPEED_GAP_S: f64 = 2.5;
@@ -553,7 +543,8 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 /// differenced positions) is interpolated linearly between its samples to
 /// every row and integrated by trapezoids, `d_j = (v_{j-1} + v_j) / 2 dt_j`,
 /// except on steps where the vehicle stands (both ends slower than
-/// [`STANDING_SPEED_MPS`] and the gyro below [`STANDING_RATE_DPS`]), which
+/// [`crate::standing::STANDING_SPEED_MPS`] and the gyro below
+/// [`crate::standing::STANDING_RATE_DPS`]), which
 /// get none. Before the first and after the last sample the speed is held.
 /// Gaps longer than [`GNSS_SPEED_GAP_S`] are bridged the same way and
 /// listed: there the distance is a guess the fit's gain cannot correct, so
@@ -632,6 +623,7 @@ pub fn distance_from_gnss_speed(
             }
         }
     }
+    use crate::standing::{STANDING_RATE_DPS, STANDING_SPEED_MPS};
     let still = |j: usize| turn_rate_dps(&rate_dps(j)) < STANDING_RATE_DPS;
     let mut d = vec![0.0; v.len()];
     let mut standing_s = 0.0;

@@ -23,8 +23,18 @@
 //! rows below the threshold lasting [`MIN_STAND_S`] is a stand: the speed
 //! is zero there, and interpolated between the gap's ends and the stand's.
 
-use crate::signals::STANDING_SPEED_MPS;
 use crate::statistics::quantile;
+
+/// A GNSS speed slower than this (m/s), on a step whose gyro turns slower
+/// than [`STANDING_RATE_DPS`], is a vehicle standing: a receiver at rest
+/// reports a few centimetres to decimetres per second of Doppler noise
+/// (u-blox: 0.05-0.2 m/s), which integrated over a stop of minutes would
+/// move the path by tens of metres. The gyro must agree, so that a vehicle
+/// turning slowly (a robot in place, a car manoeuvring) keeps its distance.
+pub const STANDING_SPEED_MPS: f64 = 0.3;
+/// See [`STANDING_SPEED_MPS`] (deg/s, the norm of the rate as logged, bias
+/// included: uncalibrated MEMS gyros are 0.1-2 deg/s off at rest).
+pub const STANDING_RATE_DPS: f64 = 3.0;
 
 /// The window over which the gyro's activity is taken (s).
 pub const ACTIVITY_WINDOW_S: f64 = 1.0;
