@@ -57,17 +57,21 @@ fn ride(dir: &Path, minutes: u32) -> PathBuf {
     let path = dir.join(format!("ride-{minutes}min.csv"));
     let seconds = (minutes * 60).to_string();
     let p = path.to_string_lossy().into_owned();
-    let _ = run(&["simulate", "--seed", "3", "--duration", &seconds, "--out", &p]);
+    let _ = run(&[
+        "simulate",
+        "--seed",
+        "3",
+        "--duration",
+        &seconds,
+        "--out",
+        &p,
+    ]);
     path
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let rounds: usize = args
-        .iter()
-        .find_map(|a| a.parse().ok())
-        .unwrap_or(3)
-        .max(1);
+    let rounds: usize = args.iter().find_map(|a| a.parse().ok()).unwrap_or(3).max(1);
     let long = !args.iter().any(|a| a == "short");
     let dir = tempfile::tempdir().expect("temporary folder");
     let out = dir.path().join("path.csv");
