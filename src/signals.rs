@@ -14,6 +14,7 @@ use thiserror::Error;
 
 use crate::geodesy::{Geodetic, LocalFrame};
 use crate::ride::RideLog;
+use crate::standing::{STANDING_RATE_DPS, STANDING_SPEED_MPS};
 
 /// Why a loaded log cannot be used for a reconstruction.
 #[derive(Debug, Error)]
@@ -543,8 +544,8 @@ pub const GNSS_SPEED_GAP_S: f64 = 2.5;
 /// differenced positions) is interpolated linearly between its samples to
 /// every row and integrated by trapezoids, `d_j = (v_{j-1} + v_j) / 2 dt_j`,
 /// except on steps where the vehicle stands (both ends slower than
-/// [`crate::standing::STANDING_SPEED_MPS`] and the gyro below
-/// [`crate::standing::STANDING_RATE_DPS`]), which
+/// [`STANDING_SPEED_MPS`] and the gyro below
+/// [`STANDING_RATE_DPS`]), which
 /// get none. Before the first and after the last sample the speed is held.
 /// Gaps longer than [`GNSS_SPEED_GAP_S`] are bridged the same way and
 /// listed: there the distance is a guess the fit's gain cannot correct, so
@@ -570,25 +571,21 @@ pub fn distance_from_gnss_speed(
         });
     }
     let t = &log.t_s;
-    let mut gaps = Vec::new();
-    for w in samples.windows(2) {
-        let (a, b) = (t[w[0]], t[w[1]]);
-        if b - a > GNSS_SPEED_GAP_S {
-            gaps.push((a, b));
-        }
-    }
+    // The samples either side of each gap, and its times.
+    let gap_samples: Vec<(usize, usize)> = samples
+        .windows(2)
+        .map(|w| (w[0], w[1]))
+        .filter(|&(i, k)| t[k] - t[i] > GNSS_SPEED_GAP_S)
+        .collect();
+    let gaps: Vec<(f64, f64)> = gap_samples.iter().map(|&(i, k)| (t[i], t[k])).collect();
     let mut v = fill_gaps(speed);
     let mut stands_in_gaps = Vec::new();
     let mut stand_rule = None;
     if !gaps.is_empty() {
         let activity = crate::standing::activity(t, &rate_dps);
         let mut in_gap = vec![false; t.len()];
-        for &(a, b) in &gaps {
-            let (first, end) = (
-                t.partition_point(|&x| x <= a),
-                t.partition_point(|&x| x < b),
-            );
-            in_gap[first..end].fill(true);
+        for &gap in &gaps {
+            in_gap[crate::standing::gap_rows(t, gap)].fill(true);
         }
         stand_rule = crate::standing::stand_rule(t, &v, &activity, &in_gap);
         if let Some(rule) = &stand_rule {
@@ -600,8 +597,9 @@ pub fn distance_from_gnss_speed(
                     known[first..=last].fill(Some(0.0));
                     stands_in_gaps.push((t[first], t[last]));
                 }
-                for w in samples.windows(2) {
-                    let (a, b) = (t[w[0]], t[w[1]]);
+                // Stands lie inside gaps, so only the gaps' samples bound them.
+                for &(i, k) in &gap_samples {
+                    let (a, b) = (t[i], t[k]);
                     let inside: Vec<(f64, f64)> = stands_in_gaps
                         .iter()
                         .copied()
@@ -610,11 +608,10 @@ pub fn distance_from_gnss_speed(
                     if inside.is_empty() {
                         continue;
                     }
-                    let knots =
-                        crate::standing::gap_knots((a, v[w[0]]), (b, v[w[1]]), &inside, ramps);
+                    let knots = crate::standing::gap_knots((a, v[i]), (b, v[k]), &inside, ramps);
                     for (x, speed) in knots {
                         let j = t.partition_point(|&y| y < x);
-                        if j > w[0] && j < w[1] && known[j].is_none() {
+                        if j > i && j < k && known[j].is_none() {
                             known[j] = Some(speed);
                         }
                     }
@@ -623,7 +620,6 @@ pub fn distance_from_gnss_speed(
             }
         }
     }
-    use crate::standing::{STANDING_RATE_DPS, STANDING_SPEED_MPS};
     let still = |j: usize| turn_rate_dps(&rate_dps(j)) < STANDING_RATE_DPS;
     let mut d = vec![0.0; v.len()];
     let mut standing_s = 0.0;

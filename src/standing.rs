@@ -131,6 +131,11 @@ pub fn stand_rule(t: &[f64], v: &[f64], activity: &[f64], in_gap: &[bool]) -> Op
     })
 }
 
+/// The rows strictly inside a gap from `a` to `b` (s).
+pub fn gap_rows(t: &[f64], (a, b): (f64, f64)) -> std::ops::Range<usize> {
+    t.partition_point(|&x| x <= a)..t.partition_point(|&x| x < b)
+}
+
 /// Row ranges `first..=last` inside the gaps (`(start, end)` in s, rows
 /// strictly between) where the activity stays below the rule's threshold
 /// for at least [`MIN_STAND_S`].
@@ -141,9 +146,8 @@ pub fn stands_in_gaps(
     rule: &StandRule,
 ) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
-    for &(a, b) in gaps {
-        let first = t.partition_point(|&x| x <= a);
-        let end = t.partition_point(|&x| x < b);
+    for &gap in gaps {
+        let std::ops::Range { start: first, end } = gap_rows(t, gap);
         let mut run: Option<usize> = None;
         for j in first..=end {
             let quiet = j < end && activity[j] < rule.threshold_dps;
@@ -187,7 +191,7 @@ pub fn ramps(t: &[f64], v: &[f64], in_gap: &[bool]) -> (Option<f64>, Option<f64>
         if look < t[0] || look > t[t.len() - 1] {
             continue;
         }
-        // The look-back (or ahead) must be logged and moving throughout.
+        // The look-back (or ahead) must be logged throughout.
         let (lo, hi) = (at(look.min(edge)), at(look.max(edge)));
         if (lo..=hi).any(|k| in_gap[k]) {
             continue;
