@@ -54,6 +54,7 @@ use rayon::prelude::*;
 use crate::model::{ChainSystem, Model, ModelSpec};
 
 mod estimated;
+pub mod heavy;
 mod search;
 
 pub use estimated::{Estimated, Limit, NoiseEstimate};
