@@ -242,6 +242,7 @@ mod tests {
                     baro: None,
                     hacc: None,
                     vacc: None,
+                    hdop: None,
                 }
             })
             .collect();

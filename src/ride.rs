@@ -36,6 +36,13 @@ pub struct RideLog {
     pub gps_hacc_m: Option<Vec<Option<f64>>>,
     /// 1-sigma vertical accuracy of the fix on this row (m).
     pub gps_vacc_m: Option<Vec<Option<f64>>>,
+    /// The receiver's horizontal dilution of precision for the fix on this
+    /// row: where no accuracy is logged, each fix is weighted by it
+    /// relative to the ride's median (see `model::fix_sigma`).
+    pub gps_hdop: Option<Vec<Option<f64>>>,
+    /// Satellites used in the fix on this row (a whole number; kept and
+    /// reported by the checks).
+    pub gps_num_sats: Option<Vec<Option<f64>>>,
     pub baro_alt_m: Option<Vec<Option<f64>>>,
     /// Specific force (m/s^2) in the same frame as the gyro, where logged.
     pub accel_mps2: Option<Vec<Option<[f64; 3]>>>,
@@ -57,6 +64,8 @@ impl RideLog {
             &mut self.gps_course_deg,
             &mut self.gps_hacc_m,
             &mut self.gps_vacc_m,
+            &mut self.gps_hdop,
+            &mut self.gps_num_sats,
             &mut self.baro_alt_m,
         ]
         .into_iter()

@@ -59,6 +59,9 @@ pub struct Fix {
     /// The receiver's own 1-sigma horizontal and vertical accuracy (m), when logged.
     pub hacc: Option<f64>,
     pub vacc: Option<f64>,
+    /// The receiver's horizontal dilution of precision, when logged: the
+    /// fix's relative accuracy where the log has no `hacc`.
+    pub hdop: Option<f64>,
 }
 
 /// Everything the model needs from a log, in SI units.
@@ -427,6 +430,7 @@ impl Signals {
                     baro: baro.as_ref().map(|b| b[row]),
                     hacc: log.gps_hacc_m.as_ref().and_then(|a| a[row]),
                     vacc: log.gps_vacc_m.as_ref().and_then(|a| a[row]),
+                    hdop: log.gps_hdop.as_ref().and_then(|a| a[row]),
                 });
             }
         }

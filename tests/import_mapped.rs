@@ -181,19 +181,18 @@ fn permuted_axes_and_radians_are_undone_by_the_mapping_the_check_names() {
     }
 }
 
-#[test]
-fn a_stretch_of_poor_fixes_is_weighted_down_by_its_accuracy() {
-    let (sim, _) = common::ride(6, 600.0, &[]);
-    let mut log = import::parse(sim.log_csv.as_bytes(), "poor.csv").unwrap();
-    // Two minutes of fixes 12 m off to the east-north-east, wandering by a few metres.
+/// A stretch of fixes 12 m off to the east-north-east for two minutes,
+/// wandering by a few metres; the log's quality fields there (`hacc` 15 m
+/// against 2.5 m, HDOP 6 against 1, 4 satellites against 9) from `quality`.
+fn poor_stretch(log: &mut import::RideLog, quality: impl Fn(bool) -> f64) -> Vec<Option<f64>> {
     let m_per_deg = 111_320.0;
-    let mut hacc = vec![None; log.len()];
+    let mut field = vec![None; log.len()];
     let mut k = 0usize;
-    for ((fix, &t), acc) in log.fix.iter_mut().zip(&log.t_s).zip(hacc.iter_mut()) {
+    for ((fix, &t), q) in log.fix.iter_mut().zip(&log.t_s).zip(field.iter_mut()) {
         let Some((lat, lon)) = *fix else { continue };
         k += 1;
         let poor = (200.0..320.0).contains(&t);
-        *acc = Some(if poor { 15.0 } else { 2.5 });
+        *q = Some(quality(poor));
         if poor {
             let wander = 4.0 * ((k as f64) * 0.37).sin();
             let (de, dn) = (12.0 + wander, 5.0 - wander);
@@ -203,18 +202,73 @@ fn a_stretch_of_poor_fixes_is_weighted_down_by_its_accuracy() {
             ));
         }
     }
-    let fit_error = |log: &import::RideLog| {
-        let sig = Arc::new(Signals::from_log(log).unwrap());
-        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
-        fit.finish();
-        sim.errors(&sig, &fit.trajectory().p).path_at_fixes_m
-    };
-    let unweighted = fit_error(&log);
+    field
+}
+
+fn fit_error(sim: &gyropath::simulation::SimulatedRide, log: &import::RideLog) -> f64 {
+    let sig = Arc::new(Signals::from_log(log).unwrap());
+    let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).unwrap();
+    fit.finish();
+    sim.errors(&sig, &fit.trajectory().p).path_at_fixes_m
+}
+
+#[test]
+fn a_stretch_of_poor_fixes_is_weighted_down_by_its_accuracy() {
+    let (sim, _) = common::ride(6, 600.0, &[]);
+    let mut log = import::parse(sim.log_csv.as_bytes(), "poor.csv").unwrap();
+    let hacc = poor_stretch(&mut log, |poor| if poor { 15.0 } else { 2.5 });
+    let unweighted = fit_error(&sim, &log);
     log.gps_hacc_m = Some(hacc);
-    let weighted = fit_error(&log);
+    let weighted = fit_error(&sim, &log);
     eprintln!("truth error at the fixes: unweighted {unweighted:.2} m, weighted {weighted:.2} m");
     assert!(
         weighted < 0.8 * unweighted,
         "weighted {weighted:.2} m vs {unweighted:.2} m"
+    );
+}
+
+/// Without an accuracy the receiver's HDOP weighs the fixes (relative to
+/// the ride's median), and the check tells what the quality fields say.
+#[test]
+fn without_an_accuracy_the_hdop_weighs_the_fixes() {
+    let (sim, _) = common::ride(6, 600.0, &[]);
+    let mut log = import::parse(sim.log_csv.as_bytes(), "poor.csv").unwrap();
+    let hdop = poor_stretch(&mut log, |poor| if poor { 6.0 } else { 1.0 });
+    let sats: Vec<Option<f64>> = hdop
+        .iter()
+        .map(|h| h.map(|h| if h > 1.0 { 4.0 } else { 9.0 }))
+        .collect();
+    let unweighted = fit_error(&sim, &log);
+    log.gps_hdop = Some(hdop);
+    log.gps_num_sats = Some(sats);
+    let weighted = fit_error(&sim, &log);
+    eprintln!("truth error at the fixes: unweighted {unweighted:.2} m, by HDOP {weighted:.2} m");
+    assert!(
+        weighted < 0.8 * unweighted,
+        "by HDOP {weighted:.2} m vs {unweighted:.2} m"
+    );
+    // Written and read back as the format's columns, and told by the check.
+    let mut csv = Vec::new();
+    import::ride_csv::write(&log, &mut csv).unwrap();
+    let back = import::parse(&csv[..], "back.csv").unwrap();
+    assert_eq!(back.gps_hdop, log.gps_hdop);
+    assert_eq!(back.gps_num_sats, log.gps_num_sats);
+    assert!(
+        back.channels.iter().all(|(n, _)| !n.starts_with("gps_")),
+        "the quality fields are no extra channels"
+    );
+    let im = import::checked(back, SourceKind::RideCsv, None, &MountChoice::Auto);
+    let v = im
+        .check
+        .verdicts
+        .iter()
+        .find(|v| v.subject == "GPS quality")
+        .expect("a GPS quality verdict");
+    assert!(
+        v.message.starts_with(
+            "HDOP 1.0 in the median, 6.0 at the 95th percentile (each fix is weighted by it"
+        ) && v.message.contains("4-9 satellites, 9 in the median")
+            && v.level == Level::Info,
+        "{v:?}"
     );
 }

@@ -108,6 +108,7 @@ fn dead_reckoning_floor(d: &Drive) -> ReferenceComparison {
                 baro: None,
                 hacc: None,
                 vacc: None,
+                hdop: None,
                 ..f.clone()
             })
         })

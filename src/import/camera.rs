@@ -159,6 +159,8 @@ pub fn read(path: &Path) -> Result<RideLog, LoadError> {
                 speed: Some(value(3)),
                 course: None,
                 hacc: None,
+                hdop: None,
+                sats: None,
             });
         }
         let utc: Option<&u64> = gps.get_t(key(b"GPSU"));

@@ -178,6 +178,8 @@ pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
             speed: Some(v[2]),
             course: Some(v[5]),
             hacc: None,
+            hdop: None,
+            sats: None,
         });
     }
     if let Some(first) = place_gnss(&mut log, &samples) {

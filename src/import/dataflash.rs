@@ -134,6 +134,8 @@ impl Messages {
                         speed: v("Spd"),
                         course: v("GCrs"),
                         hacc: None,
+                        hdop: v("HDop"),
+                        sats: v("NSats"),
                     });
                 }
                 "GPA" if first_instance(&e) => {

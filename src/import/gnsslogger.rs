@@ -327,6 +327,8 @@ pub fn parse(reader: impl BufRead, file: &str) -> Result<RideLog, LoadError> {
             speed: optional(r, speed)?.flatten(),
             course: optional(r, bearing)?.flatten(),
             hacc: optional(r, accuracy)?.flatten(),
+            hdop: None,
+            sats: None,
         });
     }
     samples.sort_by(|a, b| a.t.total_cmp(&b.t));

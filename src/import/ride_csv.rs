@@ -132,6 +132,8 @@ enum Known {
     GpsCourse,
     Hacc,
     Vacc,
+    Hdop,
+    Sats,
     Baro,
     Ax,
     Ay,
@@ -139,7 +141,7 @@ enum Known {
 }
 
 /// Names of the known columns, in the order [`write`] writes them.
-const KNOWN: [(&str, Known); 18] = [
+const KNOWN: [(&str, Known); 20] = [
     ("t_s", Known::T),
     ("gx_dps", Known::Gx),
     ("gy_dps", Known::Gy),
@@ -154,6 +156,8 @@ const KNOWN: [(&str, Known); 18] = [
     ("gps_course_deg", Known::GpsCourse),
     ("gps_hacc_m", Known::Hacc),
     ("gps_vacc_m", Known::Vacc),
+    ("gps_hdop", Known::Hdop),
+    ("gps_num_sats", Known::Sats),
     ("baro_alt_m", Known::Baro),
     ("ax_mps2", Known::Ax),
     ("ay_mps2", Known::Ay),
@@ -179,6 +183,8 @@ struct Columns {
     gps_course: Option<usize>,
     hacc: Option<usize>,
     vacc: Option<usize>,
+    hdop: Option<usize>,
+    sats: Option<usize>,
     baro: Option<usize>,
     accel: Option<[usize; 3]>,
     /// Columns the format does not know: extra channels.
@@ -270,6 +276,8 @@ impl Columns {
             gps_course: find(Known::GpsCourse),
             hacc: find(Known::Hacc),
             vacc: find(Known::Vacc),
+            hdop: find(Known::Hdop),
+            sats: find(Known::Sats),
             baro: find(Known::Baro),
             accel,
             extra,
@@ -337,6 +345,8 @@ impl<'c> RowReader<'c> {
             gps_course_deg: some_if(columns.gps_course),
             gps_hacc_m: some_if(columns.hacc),
             gps_vacc_m: some_if(columns.vacc),
+            gps_hdop: some_if(columns.hdop),
+            gps_num_sats: some_if(columns.sats),
             baro_alt_m: some_if(columns.baro),
             accel_mps2: columns.accel.map(|_| Vec::new()),
             ..RideLog::default()
@@ -437,6 +447,17 @@ impl<'c> RowReader<'c> {
         let gps_course = row.in_range(c.gps_course, -360.0..=360.0, "a course in degrees")?;
         let hacc = row.accuracy(c.hacc)?;
         let vacc = row.accuracy(c.vacc)?;
+        let hdop = row.in_range(c.hdop, 0.1..=100.0, "a dilution of precision")?;
+        let sats = row.in_range(c.sats, 0.0..=255.0, "a number of satellites")?;
+        if let Some(Some(n)) = sats
+            && n.fract() != 0.0
+        {
+            return Err(self.field_err(
+                line,
+                "gps_num_sats",
+                format!("{n} is not a whole number of satellites"),
+            ));
+        }
         let accel = match c.accel {
             Some(a) => Some(
                 match (row.number(a[0])?, row.number(a[1])?, row.number(a[2])?) {
@@ -457,6 +478,8 @@ impl<'c> RowReader<'c> {
             (&mut log.baro_alt_m, baro),
             (&mut log.gps_hacc_m, hacc),
             (&mut log.gps_vacc_m, vacc),
+            (&mut log.gps_hdop, hdop),
+            (&mut log.gps_num_sats, sats),
         ] {
             if let (Some(col), Some(v)) = (column.as_mut(), value) {
                 col.push(v);
@@ -675,12 +698,14 @@ pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
         }
     }
     header.extend(["lat_deg", "lon_deg"]);
-    let late: [(&str, &Option<Vec<Option<f64>>>); 6] = [
+    let late: [(&str, &Option<Vec<Option<f64>>>); 8] = [
         ("gps_alt_m", &log.gps_alt_m),
         ("gps_speed_mps", &log.gps_speed_mps),
         ("gps_course_deg", &log.gps_course_deg),
         ("gps_hacc_m", &log.gps_hacc_m),
         ("gps_vacc_m", &log.gps_vacc_m),
+        ("gps_hdop", &log.gps_hdop),
+        ("gps_num_sats", &log.gps_num_sats),
         ("baro_alt_m", &log.baro_alt_m),
     ];
     for (name, c) in &late {
@@ -817,6 +842,30 @@ mod tests {
         assert!(e.starts_with("bad.csv:2: column 'gps_hacc_m'"), "{e}");
         let e = err(&NEW_COLUMNS.replace(",ay_mps2", ",ay"));
         assert!(e.contains("column 'ay_mps2'"), "{e}");
+    }
+
+    /// The receiver's quality fields: a dilution of precision and a whole
+    /// number of satellites, each error naming its line and column.
+    #[test]
+    fn reads_the_receivers_hdop_and_satellites() {
+        let csv = "t_s,gx_dps,gy_dps,gz_dps,speed_mps,lat_deg,lon_deg,gps_hdop,gps_num_sats\n0,0.1,0.2,0.3,1.5,47.5,19.0,1.4,9\n0.01,0.1,0.2,0.3,1.6,,,,\n";
+        let log = parse(csv.as_bytes(), "q.csv").unwrap();
+        assert_eq!(log.gps_hdop.as_ref().unwrap(), &vec![Some(1.4), None]);
+        assert_eq!(log.gps_num_sats.as_ref().unwrap(), &vec![Some(9.0), None]);
+        assert!(log.channels.is_empty());
+        let e = err(&csv.replace(",1.4,9", ",0,9"));
+        assert!(
+            e.starts_with("bad.csv:2: column 'gps_hdop'")
+                && e.contains("not a dilution of precision"),
+            "{e}"
+        );
+        let e = err(&csv.replace(",1.4,9", ",1.4,8.5"));
+        assert!(
+            e.starts_with("bad.csv:2: column 'gps_num_sats'") && e.contains("not a whole number"),
+            "{e}"
+        );
+        let e = err(&csv.replace(",1.4,9", ",1.4,NaN"));
+        assert!(e.starts_with("bad.csv:2: column 'gps_num_sats'"), "{e}");
     }
 
     /// A log with no wheel sensor: the receiver's speed and course.

@@ -331,6 +331,9 @@ pub struct GnssSample {
     pub course: Option<f64>,
     /// The receiver's horizontal accuracy (m), where known.
     pub hacc: Option<f64>,
+    /// Its horizontal dilution of precision and satellites used, where known.
+    pub hdop: Option<f64>,
+    pub sats: Option<f64>,
 }
 
 /// Put GNSS samples on the rows of `log` (times `log.t_s`): every sample's
@@ -405,6 +408,12 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
     if chosen.values().any(|&(_, k)| samples[k].hacc.is_some()) {
         column(&mut log.gps_hacc_m);
     }
+    if chosen.values().any(|&(_, k)| samples[k].hdop.is_some()) {
+        column(&mut log.gps_hdop);
+    }
+    if chosen.values().any(|&(_, k)| samples[k].sats.is_some()) {
+        column(&mut log.gps_num_sats);
+    }
     let mut shared = 0;
     for &(_, k) in chosen.values() {
         let (s, Some(row)) = (samples[k], rows[k]) else {
@@ -420,6 +429,14 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
         }
         if let Some(h) = log.gps_hacc_m.as_mut() {
             h[row] = s.hacc.filter(|v| v.is_finite() && *v > 0.0);
+        }
+        if let Some(h) = log.gps_hdop.as_mut() {
+            h[row] = s.hdop.filter(|v| (0.1..=100.0).contains(v));
+        }
+        if let Some(n) = log.gps_num_sats.as_mut() {
+            n[row] = s
+                .sats
+                .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
         }
     }
     if shared > 0 {

@@ -394,6 +394,8 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<RideLog, LoadError> {
     let speed = gps.column("vel_m_s", 0);
     let course = gps.column("cog_rad", 0);
     let eph = gps.column("eph", 0);
+    let hdop = gps.column("hdop", 0);
+    let sats = gps.column("satellites_used", 0);
     let utc = gps.column("time_utc_usec", 0);
     let samples: Vec<GnssSample> = (0..gt.len())
         .filter(|&k| fix_type[k] >= 3.0)
@@ -408,6 +410,8 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<RideLog, LoadError> {
                 speed: speed.as_ref().map(|v| v[k]),
                 course: course.as_ref().map(|v| v[k].to_degrees()),
                 hacc: eph.as_ref().map(|v| v[k]),
+                hdop: hdop.as_ref().map(|v| v[k]),
+                sats: sats.as_ref().map(|v| v[k]),
             }
         })
         .collect();

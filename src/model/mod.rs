@@ -57,6 +57,19 @@ fn accuracy_scale(acc: impl Iterator<Item = Option<f64>>) -> Option<f64> {
     (!v.is_empty()).then(|| crate::statistics::median(&mut v))
 }
 
+/// Each fix's horizontal accuracy as the log states it: the receiver's
+/// 1-sigma `hacc` where the ride logs one, else its HDOP. Only their ratios
+/// to the ride's median are used ([`fix_sigma`]), and a fix's error is its
+/// satellites' range error times its HDOP (`sigma = UERE * HDOP`), so the
+/// HDOP's ratios are the accuracy's wherever the range error is alike.
+fn horizontal_accuracy(fixes: &[crate::signals::Fix]) -> Vec<Option<f64>> {
+    let logged = fixes.iter().any(|f| f.hacc.is_some());
+    fixes
+        .iter()
+        .map(|f| if logged { f.hacc } else { f.hdop })
+        .collect()
+}
+
 /// The noise of one fix: `sigma_k = sigma * acc_k / median(acc)`.
 ///
 /// A receiver's accuracy estimate is good at saying which fixes are worse
@@ -203,7 +216,8 @@ impl Model {
         let n_prior = effects.iter().map(|e| e.n_prior()).sum();
 
         let mut observations = Vec::new();
-        let h_scale = accuracy_scale(signals.fixes.iter().map(|f| f.hacc));
+        let h_acc = horizontal_accuracy(&signals.fixes);
+        let h_scale = accuracy_scale(h_acc.iter().copied());
         let v_scale = accuracy_scale(signals.fixes.iter().map(|f| f.vacc));
         // (wander, jitter) of a GPS axis of sigma `sigma`, each scaled by the
         // fix's accuracy: the jitter alone for independent fixes; with a
@@ -221,8 +235,8 @@ impl Model {
                 (0.0, fix_sigma(sigma, acc, scale))
             }
         };
-        for fix in &signals.fixes {
-            let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, fix.hacc, h_scale, false);
+        for (fix, &acc) in signals.fixes.iter().zip(&h_acc) {
+            let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, acc, h_scale, false);
             for axis in 0..2 {
                 observations.push(Observation {
                     row: fix.row,

@@ -42,7 +42,7 @@ use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
 use log::{sample_rate, saturation};
-use track::{AtFix, STRETCH_M, altitude, odometer_scale, stretches, summarise};
+use track::{AtFix, STRETCH_M, altitude, odometer_scale, quality, stretches, summarise};
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -244,6 +244,7 @@ pub fn check(log: &RideLog) -> CheckReport {
     report.forward = forward;
     odometer_scale(&fixes, &mut report);
     altitude(log, &fixes, &mut report);
+    quality(log, &mut report);
     if let Some(v) = vertical {
         let fwd = forward.map_or_else(
             || {

@@ -167,3 +167,63 @@ pub(super) fn altitude(log: &RideLog, fixes: &[AtFix], report: &mut CheckReport)
         ),
     }
 }
+
+/// The receiver's own quality fields, where logged: what the fixes' HDOP
+/// and satellite counts say, and how the fit uses them (the HDOP weighs
+/// each fix relative to the ride's median where no accuracy is logged).
+/// A fix from fewer than 5 satellites has no redundancy: the receiver can
+/// neither detect nor leave out a reflected signal, so a ride with many
+/// such fixes is warned of.
+pub(super) fn quality(log: &RideLog, report: &mut CheckReport) {
+    let at_fixes = |c: &Option<Vec<Option<f64>>>| -> Vec<f64> {
+        c.as_ref().map_or_else(Vec::new, |v| {
+            v.iter()
+                .zip(&log.fix)
+                .filter_map(|(x, f)| f.and(*x))
+                .collect()
+        })
+    };
+    let (hdop, sats) = (at_fixes(&log.gps_hdop), at_fixes(&log.gps_num_sats));
+    let q = |v: &[f64], p: f64| crate::statistics::quantile(&mut v.to_vec(), p);
+    let mut parts = Vec::new();
+    if !hdop.is_empty() {
+        let used = if log.gps_hacc_m.is_some() {
+            "the logged accuracy weighs the fixes"
+        } else {
+            "each fix is weighted by it relative to the median"
+        };
+        parts.push(format!(
+            "HDOP {:.1} in the median, {:.1} at the 95th percentile ({used})",
+            q(&hdop, 0.5),
+            q(&hdop, 0.95)
+        ));
+    }
+    let few = sats.iter().filter(|n| **n < 5.0).count();
+    if !sats.is_empty() {
+        let (low, high) = (q(&sats, 0.0), q(&sats, 1.0));
+        parts.push(if low == high {
+            format!("{low:.0} satellites")
+        } else {
+            format!(
+                "{low:.0}-{high:.0} satellites, {:.0} in the median",
+                q(&sats, 0.5)
+            )
+        });
+    }
+    if parts.is_empty() {
+        return;
+    }
+    let share = few as f64 / sats.len().max(1) as f64;
+    let (level, note) = if share > 0.2 {
+        (
+            Level::Warning,
+            format!(
+                "; {:.0} % of the fixes come from fewer than 5 satellites, with no redundancy to leave out a reflected signal: consider gps_outliers",
+                100.0 * share
+            ),
+        )
+    } else {
+        (Level::Info, String::new())
+    };
+    report.say("GPS quality", level, format!("{}{note}", parts.join("; ")));
+}
