@@ -30,6 +30,22 @@ pub fn quantile(values: &mut [f64], q: f64) -> f64 {
     *values.select_nth_unstable_by(at, f64::total_cmp).1
 }
 
+/// The root of `f`, positive below it and not above it, between `lo` and
+/// `hi` (> 0), by bisection in the logarithm (a scale's estimating equation:
+/// its root is found to the same relative precision at any magnitude).
+pub fn falling_root_in_log(f: impl Fn(f64) -> f64, lo: f64, hi: f64) -> f64 {
+    let (mut lo, mut hi) = (lo.ln(), hi.ln());
+    for _ in 0..100 {
+        let mid = 0.5 * (lo + hi);
+        if f(mid.exp()) > 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (0.5 * (lo + hi)).exp()
+}
+
 /// The median of the finite values of `values` (NaN for none).
 pub fn median_of_finite(values: &[f64]) -> f64 {
     let mut finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();

@@ -240,19 +240,11 @@ impl ErrorLaw {
                 let excess = |s: f64| {
                     errors.iter().map(|e| e * e / (s * s + e * e)).sum::<f64>() - 2.0 * n / 3.0
                 };
-                let (mut lo, mut hi) = ((max * 1e-9).ln(), (max * 1e3).ln());
-                if excess(lo.exp()) <= 0.0 {
+                let (lo, hi) = (max * 1e-9, max * 1e3);
+                if excess(lo) <= 0.0 {
                     return None;
                 }
-                for _ in 0..100 {
-                    let mid = 0.5 * (lo + hi);
-                    if excess(mid.exp()) > 0.0 {
-                        lo = mid;
-                    } else {
-                        hi = mid;
-                    }
-                }
-                Some((0.5 * (lo + hi)).exp())
+                Some(crate::statistics::falling_root_in_log(excess, lo, hi))
             }
         }
     }

@@ -27,19 +27,11 @@ pub fn cauchy_scale(m: &[f64]) -> Option<f64> {
     }
     let n = m.len() as f64;
     let excess = |c: f64| m.iter().map(|x| x * x / (x * x + c * c)).sum::<f64>() - 0.5 * n;
-    let (mut lo, mut hi) = (1e-3f64.ln(), 1e4f64.ln());
-    if excess(lo.exp()) <= 0.0 || excess(hi.exp()) >= 0.0 {
+    let (lo, hi) = (1e-3, 1e4);
+    if excess(lo) <= 0.0 || excess(hi) >= 0.0 {
         return None;
     }
-    for _ in 0..60 {
-        let mid = 0.5 * (lo + hi);
-        if excess(mid.exp()) > 0.0 {
-            lo = mid;
-        } else {
-            hi = mid;
-        }
-    }
-    Some((0.5 * (lo + hi)).exp())
+    Some(crate::statistics::falling_root_in_log(excess, lo, hi))
 }
 
 /// The GPS misfits (path minus fix, m) of `model` at `theta`, horizontal
