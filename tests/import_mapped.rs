@@ -181,6 +181,49 @@ fn permuted_axes_and_radians_are_undone_by_the_mapping_the_check_names() {
     }
 }
 
+/// A phone export's HDOP and satellite columns, mapped, become the ride
+/// log's `gps_hdop` and `gps_num_sats` at the fixes.
+#[test]
+fn a_mapped_export_hands_on_the_receivers_hdop_and_satellites() {
+    let dir = tempfile::tempdir().unwrap();
+    let location = std::fs::read_to_string(mapped("phone-location.csv")).unwrap();
+    let mut rows = location.lines();
+    let header = rows.next().unwrap();
+    let mut with = format!("{header},hdop,satellites\n");
+    for (k, row) in rows.enumerate() {
+        let (hdop, sats) = if k % 10 == 0 { ("4.5", 5) } else { ("0.9", 11) };
+        with.push_str(&format!("{row},{hdop},{sats}\n"));
+    }
+    std::fs::write(dir.path().join("location.csv"), with).unwrap();
+    let map = std::fs::read_to_string(mapped("phone.toml")).unwrap()
+        + "hdop = \"hdop\"\nsats = \"satellites\"\n";
+    std::fs::write(dir.path().join("phone.toml"), map).unwrap();
+    let im = import::open(
+        &mapped("phone-gyro.csv"),
+        &ImportOptions {
+            map: Some(dir.path().join("phone.toml")),
+            gps: Some(dir.path().join("location.csv")),
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap();
+    let at_fixes = |c: &Option<Vec<Option<f64>>>| -> Vec<f64> {
+        let c = c.as_ref().expect("the column");
+        im.log
+            .fix
+            .iter()
+            .zip(c)
+            .filter_map(|(f, v)| f.and(*v))
+            .collect()
+    };
+    let (hdop, sats) = (at_fixes(&im.log.gps_hdop), at_fixes(&im.log.gps_num_sats));
+    let fixes = im.log.fix.iter().flatten().count();
+    assert_eq!((hdop.len(), sats.len()), (fixes, fixes));
+    assert!(hdop.iter().all(|h| *h == 0.9 || *h == 4.5));
+    assert!(sats.iter().all(|n| *n == 11.0 || *n == 5.0));
+    assert!(hdop.iter().filter(|h| **h == 4.5).count() * 9 < fixes);
+}
+
 /// A stretch of fixes 12 m off to the east-north-east for two minutes,
 /// wandering by a few metres; the log's quality fields there (`hacc` 15 m
 /// against 2.5 m, HDOP 6 against 1, 4 satellites against 9) from `quality`.

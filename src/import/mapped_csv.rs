@@ -35,6 +35,8 @@
 //! alt = "altitude"             # optional
 //! hacc = "horizontalAccuracy"  # optional, 1-sigma m
 //! vacc = "verticalAccuracy"    # optional
+//! hdop = "hdop"                # optional, the receiver's HDOP
+//! sats = "satellites"          # optional, satellites used
 //! time = "seconds_elapsed"     # the GPS file's time column (default: [time] column)
 //! ```
 
@@ -116,6 +118,8 @@ pub struct GpsMap {
     pub alt: Option<String>,
     pub hacc: Option<String>,
     pub vacc: Option<String>,
+    pub hdop: Option<String>,
+    pub sats: Option<String>,
     pub time: Option<String>,
 }
 
@@ -407,6 +411,8 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
         map.gps.alt.as_ref(),
         map.gps.hacc.as_ref(),
         map.gps.vacc.as_ref(),
+        map.gps.hdop.as_ref(),
+        map.gps.sats.as_ref(),
     ]
     .into_iter()
     .flatten()
@@ -502,6 +508,8 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
             alt: opt(&map.gps.alt).unwrap_or(f64::NAN),
             hacc: acc(&map.gps.hacc),
             vacc: acc(&map.gps.vacc),
+            hdop: opt(&map.gps.hdop),
+            sats: opt(&map.gps.sats),
         });
     }
     let (odo_table, odo_times) = if odo.in_gps_file {

@@ -336,6 +336,16 @@ pub struct GnssSample {
     pub sats: Option<f64>,
 }
 
+/// A receiver's HDOP and satellite count as the ride-log format takes them
+/// (`gps_hdop` 0.1 to 100, `gps_num_sats` a whole number to 255); a value
+/// outside (a receiver's 0 for "unknown", say) is left out.
+fn receiver_quality(hdop: Option<f64>, sats: Option<f64>) -> (Option<f64>, Option<f64>) {
+    (
+        hdop.filter(|v| (0.1..=100.0).contains(v)),
+        sats.filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0),
+    )
+}
+
 /// Put GNSS samples on the rows of `log` (times `log.t_s`): every sample's
 /// speed and course on the row nearest it (`gps_speed_mps`,
 /// `gps_course_deg`), and the sample nearest each second of its `stamp`
@@ -430,13 +440,12 @@ pub fn place_gnss(log: &mut RideLog, samples: &[GnssSample]) -> Option<GnssSampl
         if let Some(h) = log.gps_hacc_m.as_mut() {
             h[row] = s.hacc.filter(|v| v.is_finite() && *v > 0.0);
         }
+        let (hdop, sats) = receiver_quality(s.hdop, s.sats);
         if let Some(h) = log.gps_hdop.as_mut() {
-            h[row] = s.hdop.filter(|v| (0.1..=100.0).contains(v));
+            h[row] = hdop;
         }
         if let Some(n) = log.gps_num_sats.as_mut() {
-            n[row] = s
-                .sats
-                .filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0);
+            n[row] = sats;
         }
     }
     if shared > 0 {
@@ -638,6 +647,8 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
     let has_alt = fixes.iter().any(|f| f.alt.is_finite());
     let has_hacc = fixes.iter().any(|f| f.hacc.is_some());
     let has_vacc = fixes.iter().any(|f| f.vacc.is_some());
+    let has_hdop = fixes.iter().any(|f| f.hdop.is_some());
+    let has_sats = fixes.iter().any(|f| f.sats.is_some());
     let t0 = imu[0].t_ns;
     let n = imu.len() + fixes.len();
     fn column<T>(on: bool, n: usize) -> Option<Vec<T>> {
@@ -650,6 +661,8 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
         gps_alt_m: column(has_alt, n),
         gps_hacc_m: column(has_hacc, n),
         gps_vacc_m: column(has_vacc, n),
+        gps_hdop: column(has_hdop, n),
+        gps_num_sats: column(has_sats, n),
         accel_mps2: column(imu.iter().any(|m| m.linear_acceleration.is_some()), n),
         warnings,
         ..RideLog::default()
@@ -672,6 +685,7 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
             s.push(Some(v));
         }
         log.fix.push(fix.map(|f| (f.lat, f.lon)));
+        let quality = fix.map_or((None, None), |f| receiver_quality(f.hdop, f.sats));
         for (col, value) in [
             (
                 &mut log.gps_alt_m,
@@ -679,6 +693,8 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
             ),
             (&mut log.gps_hacc_m, fix.and_then(|f| f.hacc)),
             (&mut log.gps_vacc_m, fix.and_then(|f| f.vacc)),
+            (&mut log.gps_hdop, quality.0),
+            (&mut log.gps_num_sats, quality.1),
         ] {
             if let Some(c) = col.as_mut() {
                 c.push(value);

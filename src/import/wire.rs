@@ -293,6 +293,10 @@ pub struct FixMsg {
     /// when its type is not `COVARIANCE_TYPE_UNKNOWN`.
     pub hacc: Option<f64>,
     pub vacc: Option<f64>,
+    /// The receiver's HDOP and satellites used (not in a `NavSatFix`; a
+    /// mapped CSV may have them).
+    pub hdop: Option<f64>,
+    pub sats: Option<f64>,
 }
 
 /// `header, status (i8 status, u16 service), latitude, longitude, altitude,
@@ -320,6 +324,8 @@ pub fn nav_sat_fix(w: &mut impl Wire) -> Result<FixMsg> {
             None
         },
         vacc: if known { sigma(cov[8]) } else { None },
+        hdop: None,
+        sats: None,
     })
 }
 
