@@ -33,7 +33,7 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub gyro_axes: Option<String>,
     /// GPS environment: open sky; urban (street canyons, heavy tails, fixes pulled
-    /// to one side, jumps of 10-70 m; logs gps_hacc_m and sats); or city
+    /// to one side, jumps of 10-70 m; logs gps_hacc_m and gps_num_sats); or city
     /// (reflections of 10-75 m that come and go within seconds over a broad
     /// error, a fix in about 55 % of the seconds: calibrated on a real city drive).
     #[arg(long, default_value = "open")]

@@ -77,7 +77,7 @@ pub struct SimConfig {
     /// Write the gyro in other axes or units: the mounting that undoes it
     /// (`x=-z,y=-x,z=y,scale=57.29577951308232` writes rad/s in a Husky's axes).
     pub gyro_axes: Option<crate::import::Mount>,
-    /// Open sky, or a city (see [`urban`]): urban rides also log `gps_hacc_m` and `sats`.
+    /// Open sky, or a city (see [`urban`]): urban rides also log `gps_hacc_m` and `gps_num_sats`.
     pub gps: GpsEnvironment,
     /// The gyro bias's random-walk density (deg/s/sqrt(s)); `None`: drawn in 0.002-0.004.
     pub bias_walk_dps_sqrt_s: Option<f64>,
@@ -349,9 +349,9 @@ pub fn simulate(config: &SimConfig) -> Result<SimulatedRide, SimulationError> {
         .then(|| reflections::Reflections::new(Rng::new(config.seed ^ 0x5EF1_EC71_0B5E_B111)));
     let extra_cols = match (bicycle, urban) {
         (true, false) => ",baro_alt_m,temp_c",
-        (true, true) => ",baro_alt_m,temp_c,gps_hacc_m,sats",
+        (true, true) => ",baro_alt_m,temp_c,gps_hacc_m,gps_num_sats",
         (false, false) => "",
-        (false, true) => ",gps_hacc_m,sats",
+        (false, true) => ",gps_hacc_m,gps_num_sats",
     };
     // The GNSS speed's noise and lag from their own random stream, so every
     // other draw stays as it was.
