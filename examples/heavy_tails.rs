@@ -24,18 +24,24 @@ use gyropath::simulation::{GpsEnvironment, SimConfig, simulate};
 
 fn run(name: &str, signals: Arc<Signals>, reference: &ReferenceTrack) -> anyhow::Result<()> {
     let matched = match_rows(&signals, reference)?;
-    let mut a = Reconstruction::new(signals.clone(), FitSettings::default())?;
-    a.finish();
-    let ra = compare(a.model(), a.params(), reference, &matched)
-        .horizontal
-        .rms_m;
-    let free = a
-        .model()
-        .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+    // A finished fit, its path's horizontal RMS to the reference and the
+    // parameters its likelihood integrates out (those of step 2).
+    let fitted = |settings: FitSettings| -> anyhow::Result<(Reconstruction, f64, Vec<bool>)> {
+        let mut fit = Reconstruction::new(signals.clone(), settings)?;
+        fit.finish();
+        let rms = compare(fit.model(), fit.params(), reference, &matched)
+            .horizontal
+            .rms_m;
+        let free = fit
+            .model()
+            .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        Ok((fit, rms, free))
+    };
+    let (a, ra, free) = fitted(FitSettings::default())?;
     let base = a.model().chain_system(a.params(), &free).expect("chain");
     let la = neg2_log_likelihood(a.model(), &base, a.params(), &free, &a.model().spec)
         .unwrap_or(f64::NAN);
-    let mis = gps_misfits(a.model(), a.params(), &free).expect("misfits");
+    let mis = gps_misfits(a.model(), a.params());
     let mut c = [
         cauchy_scale(&mis[0]).unwrap_or(3.0),
         cauchy_scale(&mis[1]).unwrap_or(8.0),
@@ -54,17 +60,10 @@ fn run(name: &str, signals: Arc<Signals>, reference: &ReferenceTrack) -> anyhow:
             },
             ..FitSettings::default()
         };
-        let mut b = Reconstruction::new(signals.clone(), s)?;
-        b.finish();
-        let rb = compare(b.model(), b.params(), reference, &matched)
-            .horizontal
-            .rms_m;
-        let freeb = b
-            .model()
-            .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let (b, rb, freeb) = fitted(s)?;
         let lb = cauchy_neg2_log_likelihood(b.model(), b.params(), &freeb, c).unwrap_or(f64::NAN);
         last = (rb, lb, c[0]);
-        let mis = gps_misfits(b.model(), b.params(), &freeb).expect("misfits");
+        let mis = gps_misfits(b.model(), b.params());
         c = [
             cauchy_scale(&mis[0]).unwrap_or(c[0]),
             cauchy_scale(&mis[1]).unwrap_or(c[1]),

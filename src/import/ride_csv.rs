@@ -140,6 +140,12 @@ enum Known {
     Az,
 }
 
+/// What the format takes as a receiver's HDOP (`gps_hdop`) and satellite
+/// count (`gps_num_sats`, a whole number): a reader of another format
+/// leaves out what lies outside (a receiver's 0 for "unknown", say).
+pub(crate) const HDOP_RANGE: std::ops::RangeInclusive<f64> = 0.1..=100.0;
+pub(crate) const SATS_RANGE: std::ops::RangeInclusive<f64> = 0.0..=255.0;
+
 /// Names of the known columns, in the order [`write`] writes them.
 const KNOWN: [(&str, Known); 20] = [
     ("t_s", Known::T),
@@ -447,8 +453,8 @@ impl<'c> RowReader<'c> {
         let gps_course = row.in_range(c.gps_course, -360.0..=360.0, "a course in degrees")?;
         let hacc = row.accuracy(c.hacc)?;
         let vacc = row.accuracy(c.vacc)?;
-        let hdop = row.in_range(c.hdop, 0.1..=100.0, "a dilution of precision")?;
-        let sats = row.in_range(c.sats, 0.0..=255.0, "a number of satellites")?;
+        let hdop = row.in_range(c.hdop, HDOP_RANGE, "a dilution of precision")?;
+        let sats = row.in_range(c.sats, SATS_RANGE, "a number of satellites")?;
         if let Some(Some(n)) = sats
             && n.fract() != 0.0
         {

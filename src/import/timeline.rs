@@ -337,12 +337,13 @@ pub struct GnssSample {
 }
 
 /// A receiver's HDOP and satellite count as the ride-log format takes them
-/// (`gps_hdop` 0.1 to 100, `gps_num_sats` a whole number to 255); a value
-/// outside (a receiver's 0 for "unknown", say) is left out.
+/// ([`super::ride_csv::HDOP_RANGE`], a whole number in
+/// [`super::ride_csv::SATS_RANGE`]); a value outside is left out.
 fn receiver_quality(hdop: Option<f64>, sats: Option<f64>) -> (Option<f64>, Option<f64>) {
+    use super::ride_csv::{HDOP_RANGE, SATS_RANGE};
     (
-        hdop.filter(|v| (0.1..=100.0).contains(v)),
-        sats.filter(|v| (0.0..=255.0).contains(v) && v.fract() == 0.0),
+        hdop.filter(|v| HDOP_RANGE.contains(v)),
+        sats.filter(|v| SATS_RANGE.contains(v) && v.fract() == 0.0),
     )
 }
 

@@ -35,22 +35,17 @@ pub fn cauchy_scale(m: &[f64]) -> Option<f64> {
 }
 
 /// The GPS misfits (path minus fix, m) of `model` at `theta`, horizontal
-/// and vertical apart (barometric rows left out).
-pub fn gps_misfits(model: &Model, theta: &[f64], free: &[bool]) -> Option<[Vec<f64>; 2]> {
-    let base = model.chain_system(theta, free)?;
-    let plan = model.obs_plan(theta);
+/// and vertical apart (barometric rows left out), from the path at the rows
+/// the observations read ([`Model::misfits`]).
+pub fn gps_misfits(model: &Model, theta: &[f64]) -> [Vec<f64>; 2] {
+    let path = model.sparse_path(theta, model.residual_rows(theta));
     let mut out = [Vec::new(), Vec::new()];
-    for ((o, x), y) in model
-        .observations
-        .iter()
-        .zip(&base.linearisation().x)
-        .zip(&plan.target)
-    {
+    for (o, m) in model.observations.iter().zip(model.misfits(theta, &path)) {
         if !o.baro {
-            out[usize::from(o.axis == 2)].push(x - y);
+            out[usize::from(o.axis == 2)].push(m.metres);
         }
     }
-    Some(out)
+    out
 }
 
 /// `-2 ln L` of `model`'s path at `theta` under independent Cauchy fixes of
