@@ -1,5 +1,5 @@
 //! Where a fit's time goes: wall time per phase (step 1, step 2, noise
-//! search) of a simulated ride, and then its uncertainty at every row. `cargo run --release --example phase_times -- [minutes] [seed]`.
+//! search) of a simulated ride, and then its uncertainty at every row and the path's error to the truth. `cargo run --release --example phase_times -- [minutes] [seed]`.
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -20,6 +20,7 @@ fn main() -> anyhow::Result<()> {
     })?;
     let started = Instant::now();
     let sig = Arc::new(Signals::from_log(&parse(sim.log_csv.as_bytes(), "sim")?)?);
+    let signals = sig.clone();
     let load = started.elapsed().as_secs_f64();
     let mut rec = Reconstruction::new(sig, FitSettings::default())?;
     let mut times = [0.0f64; 3];
@@ -51,6 +52,10 @@ fn main() -> anyhow::Result<()> {
         counts[1],
         times[2],
         rec.stats().rms_horizontal_m
+    );
+    println!(
+        "path to the truth at the fixes {:.3} m",
+        sim.errors(&signals, &rec.trajectory().p).path_at_fixes_m
     );
     if let Some(n) = rec.noise() {
         println!("{}", n.describe());

@@ -303,6 +303,15 @@ pub trait Effect: Send + Sync + std::fmt::Debug {
         None
     }
 
+    /// This effect under `spec` (the same effects, other noise or prior
+    /// settings), sharing what does not depend on them: a noise search
+    /// rebuilds the model at every setting it tries, and a per-row table
+    /// rebuilt each time cost more than the likelihood of a long ride's
+    /// window. `None`: build it anew from the ride.
+    fn reweighted(&self, _spec: &ModelSpec) -> Option<Box<dyn Effect>> {
+        None
+    }
+
     /// Number of prior residual rows.
     fn n_prior(&self) -> usize {
         0

@@ -7,18 +7,20 @@
 //! residuals `(b_s - b_{s-1}) / (sigma_w sqrt(T))` for a bias random walk of
 //! density `sigma_w` (rad/s/sqrt(s)); without it (`None`) the model is the paper's.
 
+use std::sync::Arc;
+
 use nalgebra::Vector3;
 
 use super::gyro_bias::DEG_PER_RAD;
 use super::{Effect, GyroPartials, ParamInfo, PriorRows, Role};
-use crate::contract::{ModelError, StartGuess};
+use crate::contract::{ModelError, ModelSpec, StartGuess};
 use crate::signals::Signals;
 
 #[derive(Clone, Debug)]
 pub struct GyroBiasSegments {
     segment_s: f64,
-    /// Segment of each step (index = row).
-    segment_of: Vec<u32>,
+    /// Segment of each step (index = row), shared by reweighted copies.
+    segment_of: Arc<[u32]>,
     /// Segment boundaries in log time, `n + 1` values.
     edges: Vec<f64>,
     /// `1 / (sigma_w sqrt(T))`, or 0 without a prior.
@@ -52,7 +54,7 @@ impl GyroBiasSegments {
         let t0 = signals.t[0];
         let duration = signals.duration();
         let n = ((duration / segment_s).ceil() as usize).max(1);
-        let segment_of: Vec<u32> = (0..signals.len())
+        let segment_of: Arc<[u32]> = (0..signals.len())
             .map(|j| {
                 let mid = if j == 0 {
                     signals.t[0]
@@ -69,13 +71,11 @@ impl GyroBiasSegments {
             let e = &mut steps[s as usize];
             *e = Some(e.map_or((j, j), |(a, _)| (a, j)));
         }
-        let prior_weight =
-            bias_walk_dps_sqrt_s.map_or(0.0, |w| 1.0 / (w / DEG_PER_RAD * segment_s.sqrt()));
         Ok(Self {
             segment_s,
             segment_of,
             edges,
-            prior_weight,
+            prior_weight: prior_weight(segment_s, bias_walk_dps_sqrt_s),
             steps,
             planar: signals.attitude.is_planar(),
         })
@@ -93,6 +93,12 @@ impl GyroBiasSegments {
     pub fn segment_of(&self, j: usize) -> usize {
         self.segment_of[j] as usize
     }
+}
+
+/// The prior rows' weight `1 / (sigma_w sqrt(T))` of segments `T` long
+/// under a walk `sigma_w` (deg/s/sqrt(s)); 0 without a prior.
+fn prior_weight(segment_s: f64, bias_walk_dps_sqrt_s: Option<f64>) -> f64 {
+    bias_walk_dps_sqrt_s.map_or(0.0, |w| 1.0 / (w / DEG_PER_RAD * segment_s.sqrt()))
 }
 
 impl Effect for GyroBiasSegments {
@@ -159,12 +165,24 @@ impl Effect for GyroBiasSegments {
         grad: &mut [Vector3<f64>],
         grad_p: &mut [f64],
     ) {
-        for (g, &s) in grad.iter().zip(&self.segment_of).skip(1) {
+        for (g, &s) in grad.iter().zip(self.segment_of.iter()).skip(1) {
             let s = 3 * s as usize;
             grad_p[s] -= g.x;
             grad_p[s + 1] -= g.y;
             grad_p[s + 2] -= g.z;
         }
+    }
+
+    /// Same segments, the prior of `spec`'s walk: the per-row table is shared.
+    fn reweighted(&self, spec: &ModelSpec) -> Option<Box<dyn Effect>> {
+        let walk = spec.bias_walk_dps_sqrt_s;
+        let valid = walk.is_none_or(|w| w.is_finite() && w > 0.0);
+        (spec.segment_s == self.segment_s && valid).then(|| {
+            Box::new(Self {
+                prior_weight: prior_weight(self.segment_s, walk),
+                ..self.clone()
+            }) as Box<dyn Effect>
+        })
     }
 
     fn n_prior(&self) -> usize {

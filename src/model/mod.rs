@@ -158,6 +158,17 @@ impl Model {
         spec: ModelSpec,
         start: StartGuess,
     ) -> Result<Self, ModelError> {
+        Self::checked(&spec)?;
+        let ids = effects::expand(&spec.effects, &signals)?;
+        let effects: Vec<Box<dyn Effect>> = ids
+            .iter()
+            .map(|id| effects::build(id, &signals, &spec, &start))
+            .collect::<Result<_, _>>()?;
+        Self::assemble(signals, spec, start, effects)
+    }
+
+    /// `spec`'s noise settings, or why they cannot be.
+    fn checked(spec: &ModelSpec) -> Result<(), ModelError> {
         for (name, v) in [
             ("GPS horizontal sigma", spec.sigma_horizontal_m),
             ("GPS vertical sigma", spec.sigma_vertical_m),
@@ -193,11 +204,16 @@ impl Model {
                 spec.gps_white_m
             )));
         }
-        let ids = effects::expand(&spec.effects, &signals)?;
-        let effects: Vec<Box<dyn Effect>> = ids
-            .iter()
-            .map(|id| effects::build(id, &signals, &spec, &start))
-            .collect::<Result<_, _>>()?;
+        Ok(())
+    }
+
+    /// The model of `spec` made of `effects` (built for it).
+    fn assemble(
+        signals: Arc<Signals>,
+        spec: ModelSpec,
+        start: StartGuess,
+        effects: Vec<Box<dyn Effect>>,
+    ) -> Result<Self, ModelError> {
         let mut offsets = vec![0];
         for e in &effects {
             offsets.push(offsets.last().copied().unwrap_or(0) + e.n_params());
@@ -372,6 +388,83 @@ impl Model {
         m.observations.retain(|o| t[o.row] <= t_end);
         // A fix looks at most a few seconds back (GPS lag), never past its own row.
         m.horizon = t.partition_point(|&x| x <= t_end + HORIZON_MARGIN_S).max(1);
+        Ok(m)
+    }
+
+    /// The same model seeing only the GPS rows from `t_start` to `t_end`
+    /// (log time), its sweeps ending there as [`Model::restricted`]'s: a
+    /// window of a long ride on which the noise settings are estimated.
+    pub fn between(&self, t_start: f64, t_end: f64) -> Result<Self, ModelError> {
+        let mut m = self.restricted(t_end)?;
+        let t = &self.signals.t;
+        m.observations.retain(|o| t[o.row] >= t_start);
+        Ok(m)
+    }
+
+    /// `free` less the parameters that act only outside this model's fixes:
+    /// past the rows it sweeps (a restricted model's later segment biases,
+    /// which nothing observes and a chain solve would carry as open columns)
+    /// and, for a window from [`Model::between`], wholly before its first
+    /// fix (the segment biases there stay as fitted: the globals still move
+    /// and turn the path at the window, and the solve need not cross the
+    /// ride up to it).
+    pub fn free_within_fixes(&self, free: &[bool]) -> Vec<bool> {
+        let last = self.horizon.saturating_sub(1);
+        let first = self.observations.first().map_or(0, |o| o.row);
+        free.iter()
+            .enumerate()
+            .map(|(i, &f)| f && !self.acts_after(i, last) && !self.acts_before(i, first))
+            .collect()
+    }
+
+    /// Whether parameter `i` acts only on steps before `row`.
+    fn acts_before(&self, i: usize, row: usize) -> bool {
+        let e = self.offsets.partition_point(|&o| o <= i) - 1;
+        self.effects[e]
+            .param_steps(i - self.offsets[e])
+            .is_some_and(|(_, end)| end < row)
+    }
+
+    /// Time (s) from this model's first observed fix to its last.
+    pub fn fix_span(&self) -> f64 {
+        self.observations
+            .first()
+            .zip(self.observations.last())
+            .map_or(0.0, |(f, l)| l.t - f.t)
+    }
+
+    /// Fixes with at least one observation in this model.
+    pub fn observed_fixes(&self) -> usize {
+        let mut rows: Vec<usize> = self.observations.iter().map(|o| o.row).collect();
+        rows.dedup();
+        rows.len()
+    }
+
+    /// This ride and start guess under `spec`, seeing the same fixes as this
+    /// model (all of them, a window's from [`Model::between`] or a fold's).
+    pub fn with_spec(&self, spec: ModelSpec) -> Result<Self, ModelError> {
+        let mut m = if spec.effects == self.spec.effects {
+            // The same effects: each reweighted for the new settings where it
+            // can be (sharing its per-row tables), else built anew.
+            Self::checked(&spec)?;
+            let ids = effects::expand(&spec.effects, &self.signals)?;
+            let effects = ids
+                .iter()
+                .zip(&self.effects)
+                .map(|(id, e)| match e.reweighted(&spec) {
+                    Some(e) => Ok(e),
+                    None => effects::build(id, &self.signals, &spec, &self.start),
+                })
+                .collect::<Result<_, _>>()?;
+            Self::assemble(self.signals.clone(), spec, self.start.clone(), effects)?
+        } else {
+            Self::with_start(self.signals.clone(), spec, self.start.clone())?
+        };
+        // Observations are in row order.
+        let rows: Vec<usize> = self.observations.iter().map(|o| o.row).collect();
+        m.observations
+            .retain(|o| rows.binary_search(&o.row).is_ok());
+        m.horizon = self.horizon;
         Ok(m)
     }
 

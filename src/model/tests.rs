@@ -360,3 +360,80 @@ fn chunked_parallel_sweep_equals_the_sequential_path() {
         assert!((a - b).abs() < 1e-10 * b, "stale anchor {a} vs {b}");
     }
 }
+
+/// The noise search rebuilds the model at every setting it tries through
+/// `with_spec`, which shares the segments' per-row table: the result must
+/// be the model built for those settings from scratch, on the whole ride
+/// and on a window of it.
+#[test]
+fn a_model_under_other_noise_settings_is_the_one_built_for_them() {
+    let m = correlated_model(Increment::Exact, Some(0.004), Some(20.0));
+    let mut p = m.initial_params();
+    for (i, v) in p.iter_mut().enumerate() {
+        *v += 1e-4 * ((i % 7) as f64 - 3.0);
+    }
+    let spec = ModelSpec {
+        sigma_horizontal_m: 2.5,
+        gps_tau_s: Some(40.0),
+        gps_white_m: 0.3,
+        bias_walk_dps_sqrt_s: Some(0.01),
+        ..m.spec.clone()
+    };
+    let fresh = Model::with_start(m.signals.clone(), spec.clone(), m.start.clone()).unwrap();
+    let reused = m.with_spec(spec.clone()).unwrap();
+    let (a, b) = (reused.cost(&p), fresh.cost(&p));
+    assert!((a - b).abs() <= 1e-12 * b, "reused {a} vs fresh {b}");
+    assert_eq!(reused.n_residuals(), fresh.n_residuals());
+    // The prior changed with the walk: the same model at the old walk costs otherwise.
+    assert!((m.cost(&p) - b).abs() > 1e-6 * b);
+    // A window keeps its fixes under the new settings.
+    let t0 = m.signals.t[0];
+    let window = m.between(t0 + 20.0, t0 + 40.0).unwrap();
+    let (w_reused, w_fresh) = (
+        window.with_spec(spec.clone()).unwrap(),
+        fresh.between(t0 + 20.0, t0 + 40.0).unwrap(),
+    );
+    assert_eq!(w_reused.observed_fixes(), w_fresh.observed_fixes());
+    assert!(w_reused.observed_fixes() > 0 && w_reused.observed_fixes() < m.observed_fixes());
+    let (a, b) = (w_reused.cost(&p), w_fresh.cost(&p));
+    assert!((a - b).abs() <= 1e-12 * b, "window {a} vs {b}");
+    // Settings no model can have are refused as by a fresh build.
+    let bad = ModelSpec {
+        gps_white_m: f64::NAN,
+        ..spec
+    };
+    assert!(m.with_spec(bad).is_err());
+}
+
+/// A window of the ride frees the globals and only the segment biases that
+/// act between its first fix and the end of its sweep.
+#[test]
+fn a_window_frees_the_globals_and_its_own_segments() {
+    let m = model(Increment::Exact, Some(0.004));
+    let t0 = m.signals.t[0];
+    let window = m.between(t0 + 20.0, t0 + 35.0).unwrap();
+    let all = m.free_mask(&[Role::Global, Role::Segments]);
+    let free = window.free_within_fixes(&all);
+    assert_eq!(
+        m.free_within_fixes(&all),
+        all,
+        "the whole ride frees everything"
+    );
+    let seg = m.effect_index("gyro_bias_segments").unwrap();
+    let effect = &m.effects()[seg];
+    let first = window.observations[0].row;
+    let last = window.horizon() - 1;
+    for (i, &f) in free.iter().enumerate() {
+        if m.range(seg).contains(&i) {
+            let (a, b) = effect.param_steps(i - m.range(seg).start).unwrap();
+            assert_eq!(
+                f,
+                all[i] && b >= first && a <= last,
+                "segment parameter {i}"
+            );
+        } else {
+            assert_eq!(f, all[i], "global parameter {i}");
+        }
+    }
+    assert!(free.iter().filter(|&&f| f).count() < all.iter().filter(|&&f| f).count());
+}
