@@ -276,8 +276,12 @@ fn estimate_on(
     } else {
         window_models.iter().collect()
     };
-    // Each part's free parameters: a window's reach only to its end.
-    let frees: Vec<Vec<bool>> = parts.iter().map(|m| m.free_within_fixes(free)).collect();
+    // Each part's free parameters: a window's only those acting within it.
+    let frees: Vec<Vec<bool>> = if window_models.is_empty() {
+        vec![free.to_vec()]
+    } else {
+        parts.iter().map(|m| m.free_within_fixes(free)).collect()
+    };
     // The path's derivatives do not depend on the noise: linearise once.
     let bases = parts
         .iter()
@@ -299,7 +303,11 @@ fn estimate_on(
         let mean = |f: fn(&(f64, f64, f64)) -> f64| {
             (each.iter().map(|g| f(g).ln()).sum::<f64>() / each.len() as f64).exp()
         };
-        (!each.is_empty()).then(|| (mean(|g| g.0), mean(|g| g.1), mean(|g| g.2)))
+        match each.as_slice() {
+            [] => None,
+            [one] => Some(*one),
+            _ => Some((mean(|g| g.0), mean(|g| g.1), mean(|g| g.2))),
+        }
     };
     let horizontal = guess(false).filter(|_| which.gps);
     if let Some((sigma, tau, jitter)) = horizontal {
