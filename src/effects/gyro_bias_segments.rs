@@ -44,13 +44,7 @@ impl GyroBiasSegments {
                 "segment length must be at least 0.05 s, got {segment_s}"
             )));
         }
-        if let Some(w) = bias_walk_dps_sqrt_s
-            && !(w.is_finite() && w > 0.0)
-        {
-            return Err(ModelError::Setting(format!(
-                "bias random walk must be a positive number of deg/s/sqrt(s), got {w}"
-            )));
-        }
+        check_walk(bias_walk_dps_sqrt_s)?;
         let t0 = signals.t[0];
         let duration = signals.duration();
         let n = ((duration / segment_s).ceil() as usize).max(1);
@@ -92,6 +86,16 @@ impl GyroBiasSegments {
     /// Segment index of step `j`.
     pub fn segment_of(&self, j: usize) -> usize {
         self.segment_of[j] as usize
+    }
+}
+
+/// A bias walk is a positive density (deg/s/sqrt(s)), or none.
+fn check_walk(bias_walk_dps_sqrt_s: Option<f64>) -> Result<(), ModelError> {
+    match bias_walk_dps_sqrt_s {
+        Some(w) if !(w.is_finite() && w > 0.0) => Err(ModelError::Setting(format!(
+            "bias random walk must be a positive number of deg/s/sqrt(s), got {w}"
+        ))),
+        _ => Ok(()),
     }
 }
 
@@ -176,8 +180,8 @@ impl Effect for GyroBiasSegments {
     /// Same segments, the prior of `spec`'s walk: the per-row table is shared.
     fn reweighted(&self, spec: &ModelSpec) -> Option<Box<dyn Effect>> {
         let walk = spec.bias_walk_dps_sqrt_s;
-        let valid = walk.is_none_or(|w| w.is_finite() && w > 0.0);
-        (spec.segment_s == self.segment_s && valid).then(|| {
+        // An invalid walk is left to the fresh build, which says why.
+        (spec.segment_s == self.segment_s && check_walk(walk).is_ok()).then(|| {
             Box::new(Self {
                 prior_weight: prior_weight(self.segment_s, walk),
                 ..self.clone()

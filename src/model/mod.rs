@@ -419,10 +419,14 @@ impl Model {
 
     /// Whether parameter `i` acts only on steps before `row`.
     fn acts_before(&self, i: usize, row: usize) -> bool {
+        self.param_steps(i).is_some_and(|(_, last)| last < row)
+    }
+
+    /// First and last step that parameter `i` acts on (its effect's
+    /// [`Effect::param_steps`]); `None`: every step.
+    fn param_steps(&self, i: usize) -> Option<(usize, usize)> {
         let e = self.offsets.partition_point(|&o| o <= i) - 1;
-        self.effects[e]
-            .param_steps(i - self.offsets[e])
-            .is_some_and(|(_, end)| end < row)
+        self.effects[e].param_steps(i - self.offsets[e])
     }
 
     /// Time (s) from this model's first observed fix to its last.
@@ -549,10 +553,7 @@ impl Model {
 
     /// Whether parameter `i` acts only on steps after `row`.
     fn acts_after(&self, i: usize, row: usize) -> bool {
-        let e = self.offsets.partition_point(|&o| o <= i) - 1;
-        self.effects[e]
-            .param_steps(i - self.offsets[e])
-            .is_some_and(|(first, _)| first > row)
+        self.param_steps(i).is_some_and(|(first, _)| first > row)
     }
 
     /// Whether every free parameter acts only after the anchor, so that

@@ -225,12 +225,7 @@ pub fn estimate(
     free: &[bool],
     which: AutoNoise,
 ) -> Option<NoiseEstimate> {
-    let fixes = &model.signals.fixes;
-    let span = fixes
-        .last()
-        .zip(fixes.first())
-        .map_or(0.0, |(l, f)| l.t - f.t);
-    let windows = (span > WINDOWED_SPAN_S).then_some(Windows {
+    let windows = (model.fix_span() > WINDOWED_SPAN_S).then_some(Windows {
         count: WINDOWS,
         length_s: WINDOW_S,
     });
@@ -271,16 +266,14 @@ fn estimate_on(
         Some(w) => w.of(model)?,
         None => Vec::new(),
     };
-    let parts: Vec<&Model> = if window_models.is_empty() {
-        vec![model]
+    // Each part with its free parameters: a window's only those acting within it.
+    let (parts, frees): (Vec<&Model>, Vec<Vec<bool>>) = if window_models.is_empty() {
+        (vec![model], vec![free.to_vec()])
     } else {
-        window_models.iter().collect()
-    };
-    // Each part's free parameters: a window's only those acting within it.
-    let frees: Vec<Vec<bool>> = if window_models.is_empty() {
-        vec![free.to_vec()]
-    } else {
-        parts.iter().map(|m| m.free_within_fixes(free)).collect()
+        window_models
+            .iter()
+            .map(|m| (m, m.free_within_fixes(free)))
+            .unzip()
     };
     // The path's derivatives do not depend on the noise: linearise once.
     let bases = parts
