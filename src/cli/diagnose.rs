@@ -4,10 +4,9 @@ use super::*;
 
 #[derive(Debug, Args)]
 #[command(mut_arg("gps_noise", |a| a.help(
-    "GPS noise: `auto` fits the base model with the noise estimated from the ride, then \
-     ranks every candidate under independent 3 m fixes (the noise the significance rule \
-     was calibrated under); `SIGMA`, `SIGMA,TAU` or `SIGMA,TAU,JITTER` (m, s, m) are used \
-     for both"
+    "GPS noise: `auto` fits the base model and ranks every candidate under independent \
+     3 m fixes (the noise the significance rule was calibrated under; `fit` estimates the \
+     ride's own); `SIGMA`, `SIGMA,TAU` or `SIGMA,TAU,JITTER` (m, s, m) are used for both"
 )))]
 pub struct DiagnoseArgs {
     /// Ride log (CSV), ROS 1 bag, ROS 2 bag (MCAP file or rosbag2 folder),
