@@ -169,13 +169,7 @@ pub fn diagnose_against(
     // the model is fitted under it from the start: estimating the ride's own
     // noise first would only be refitted away (a 20-minute ride's diagnosis
     // took 3.4 times its fit with that detour).
-    let mut fit = Reconstruction::new(
-        signals,
-        FitSettings {
-            auto_noise: crate::optimisation::AutoNoise::OFF,
-            ..settings.clone()
-        },
-    )?;
+    let mut fit = Reconstruction::new(signals, ranking_settings(settings))?;
     fit.finish();
     diagnose_fitted_against(
         fit.model(),
@@ -185,6 +179,15 @@ pub fn diagnose_against(
         reference,
         progress,
     )
+}
+
+/// The settings a ranking runs under: `settings` with the noise as set
+/// (see [`diagnose_fitted`]).
+fn ranking_settings(settings: &FitSettings) -> FitSettings {
+    FitSettings {
+        auto_noise: crate::optimisation::AutoNoise::OFF,
+        ..settings.clone()
+    }
 }
 
 /// A reference track and its rows matched to the ride.
@@ -217,10 +220,7 @@ pub fn diagnose_fitted_against(
     reference: Option<Against>,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, FitError> {
-    let settings = &FitSettings {
-        auto_noise: crate::optimisation::AutoNoise::OFF,
-        ..settings.clone()
-    };
+    let settings = &ranking_settings(settings);
     let set = ModelSpec {
         effects: model.spec.effects.clone(),
         segment_s: model.spec.segment_s,
