@@ -60,6 +60,35 @@ pub struct ModelSpec {
     #[serde(default)]
     pub gps_tau_vertical_s: Option<f64>,
     pub increment: Increment,
+    /// Heavy tails of the GPS error learnt from this ride (see
+    /// [`GpsTails`]); `None`: Gaussian. Not saved with the settings: its
+    /// per-fix scales belong to one ride, and the next ride's fit learns its own.
+    #[serde(skip)]
+    pub gps_tails: Option<GpsTails>,
+}
+
+/// A Student-t GPS error: each fix's error (its jitter and the wander's step
+/// into it) is Gaussian with its variance divided by a weight `w_k` of its
+/// own, `w_k ~ Gamma(nu / 2, nu / 2)`, so that a fix's bivariate innovation
+/// follows a t law of `nu` degrees of freedom. A reflection that puts a fix
+/// tens of metres off is then one unlikely draw of a heavy-tailed step, not
+/// evidence that the whole error wanders that far; the fit holds the weights
+/// at their expectation given the fixes (`optimisation::noise::tails`) and
+/// scales each fix's noise by `1 / sqrt(w_k)` (relative to the ride's median).
+#[derive(Clone, Debug, PartialEq)]
+pub struct GpsTails {
+    /// Degrees of freedom of the t law (small: heavy tails).
+    pub nu: f64,
+    /// Per fix (indexed as `Signals::fixes`), the factor on its horizontal
+    /// noise, `1 / sqrt(w_k)` over the ride's median of it.
+    pub scale: std::sync::Arc<[f64]>,
+}
+
+impl GpsTails {
+    /// The factor on fix `i`'s horizontal noise (1 for a fix it does not cover).
+    pub fn scale_of(&self, i: usize) -> f64 {
+        self.scale.get(i).copied().unwrap_or(1.0)
+    }
 }
 
 impl Default for ModelSpec {
@@ -76,6 +105,7 @@ impl Default for ModelSpec {
             gps_white_vertical_m: None,
             gps_tau_vertical_s: None,
             increment: Increment::Exact,
+            gps_tails: None,
         }
     }
 }
@@ -98,6 +128,10 @@ impl ModelSpec {
             ", outliers down-weighted"
         } else {
             ""
+        };
+        let robust = match &self.gps_tails {
+            Some(t) => format!(", Student-t fixes (nu {:.1}){robust}", t.nu),
+            None => robust.to_string(),
         };
         match self.gps_tau_s {
             Some(tau) => format!(

@@ -30,7 +30,9 @@ pub use crate::rotation;
 mod sweep;
 mod uncertainty;
 
-pub use crate::contract::{DEFAULT_BIAS_WALK, ModelError, ModelSpec, StartError, StartGuess};
+pub use crate::contract::{
+    DEFAULT_BIAS_WALK, GpsTails, ModelError, ModelSpec, StartError, StartGuess,
+};
 pub use chain::{ChainSystem, Marginals};
 pub use jacobian::Linearisation;
 pub use normal::NormalEquations;
@@ -251,8 +253,10 @@ impl Model {
                 (0.0, fix_sigma(sigma, acc, scale))
             }
         };
-        for (fix, &acc) in signals.fixes.iter().zip(&h_acc) {
+        for (i, (fix, &acc)) in signals.fixes.iter().zip(&h_acc).enumerate() {
             let (sd_gm, sd_white) = split(spec.sigma_horizontal_m, acc, h_scale, false);
+            let tail = spec.gps_tails.as_ref().map_or(1.0, |t| t.scale_of(i));
+            let (sd_gm, sd_white) = (sd_gm * tail, sd_white * tail);
             for axis in 0..2 {
                 observations.push(Observation {
                     row: fix.row,

@@ -113,6 +113,9 @@ pub struct NoiseEstimate {
     pub neg2_log_likelihood: f64,
     /// Likelihood evaluations (chain solves) the search took.
     pub evaluations: usize,
+    /// The heavy tails learnt from the ride (`None`: Gaussian fixes).
+    #[serde(default)]
+    pub gps_tails: Option<super::tails::TailSummary>,
 }
 
 impl NoiseEstimate {
@@ -200,8 +203,12 @@ impl NoiseEstimate {
         let heights = self
             .heights_text()
             .map_or(String::new(), |h| format!(", heights {h}"));
+        let tails = self
+            .gps_tails
+            .as_ref()
+            .map_or(String::new(), |t| format!(", {}", t.describe()));
         format!(
-            "GPS sigma {}, {}, {}{heights}, bias walk {}",
+            "GPS sigma {}, {}, {}{tails}{heights}, bias walk {}",
             self.gps_sigma_m.describe("m", 2),
             self.tau_text(),
             self.jitter_text(),

@@ -56,6 +56,7 @@ use crate::model::{ChainSystem, Model, ModelSpec};
 mod estimated;
 pub mod heavy;
 mod search;
+pub mod tails;
 
 pub use estimated::{Estimated, Limit, NoiseEstimate};
 use search::{Objective, SIDE_BY_SIDE_FIXES, newton, one_sided};
@@ -485,6 +486,7 @@ fn estimate_on(
         gps_tau_vertical_s: est(5),
         neg2_log_likelihood: value,
         evaluations,
+        gps_tails: None,
     })
 }
 
