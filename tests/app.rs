@@ -82,7 +82,7 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
         .gps_noise
         .clone();
     assert!(law.contains("GPS"), "{law}");
-    h.get_by_label(&law);
+    h.get_by_label(&format!("GPS error law: {law}"));
     // The finished fit says how sure it is: a band along the path, a band on
     // the biases, every parameter with its sigma.
     let snap = h.state().snapshot.as_ref().expect("snapshot");

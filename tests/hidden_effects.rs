@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use gyropath::diagnosis::{Diagnosis, Folds, diagnose};
 use gyropath::model::ModelSpec;
-use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
 use gyropath::signals::Signals;
 use gyropath::simulation::SimulatedRide;
 
@@ -26,8 +26,18 @@ fn settings(effects: &[&str]) -> FitSettings {
 
 /// Path error against the truth of a full fit, RMS over all rows: horizontal and 3-D.
 fn truth_error(sim: &SimulatedRide, sig: &Arc<Signals>, effects: &[&str]) -> (f64, f64) {
-    let mut fit = Reconstruction::new(sig.clone(), settings(effects)).expect("fit");
+    truth_error_under(sim, sig, settings(effects))
+}
+
+/// [`truth_error`] of a fit under `settings`.
+fn truth_error_under(sim: &SimulatedRide, sig: &Arc<Signals>, settings: FitSettings) -> (f64, f64) {
+    let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
     fit.finish();
+    truth_error_of(sim, sig, &fit)
+}
+
+/// [`truth_error`] of a finished fit.
+fn truth_error_of(sim: &SimulatedRide, sig: &Arc<Signals>, fit: &Reconstruction) -> (f64, f64) {
     let path = fit.trajectory().p;
     let truth = sim.truth_in(&sig.frame);
     let d3 = path
@@ -156,11 +166,48 @@ fn gyro_scale_is_found_and_the_yaw_factor_recovered() {
     }
 }
 
+/// Hidden outliers: `diagnose`, which ranks under the Gaussian law as set,
+/// puts `gps_outliers` first, and its robust loss beats the Gaussian law
+/// learnt from the ride. The default fit learns heavy tails of its own
+/// (Student-t, where the innovations ask for them), which take the outliers
+/// better still (seeds 45, 46: 1.92 and 1.33 m from the truth, against 2.07
+/// and 1.54 m with the robust loss and 2.29 and 1.78 m Gaussian).
 #[test]
 fn gps_outliers_are_found() {
     for seed in [45, 46] {
         let c = case(seed, &["gps_outliers"], &["paper"]);
-        found(&c, "gps_outliers", &["paper"]);
+        let best = &c.diagnosis.ranking[0];
+        assert_eq!(best.effect, "gps_outliers", "{:?}", c.diagnosis.ranking);
+        assert!(best.significant && best.drop > 0.05, "{best:?}");
+        let gaussian = truth_error_under(
+            &c.sim,
+            &c.sig,
+            FitSettings {
+                auto_noise: AutoNoise {
+                    tails: false,
+                    ..AutoNoise::default()
+                },
+                ..settings(&["paper"])
+            },
+        );
+        let robust = truth_error(&c.sim, &c.sig, &["paper", "gps_outliers"]);
+        let mut fit = Reconstruction::new(c.sig.clone(), settings(&["paper"])).expect("fit");
+        fit.finish();
+        let tails = fit
+            .noise()
+            .and_then(|n| n.gps_tails.clone())
+            .expect("the default learns the outliers' tails");
+        let default = truth_error_of(&c.sim, &c.sig, &fit);
+        eprintln!(
+            "  truth error horizontal: Gaussian {:.3} m, gps_outliers {:.3} m, default ({}) {:.3} m",
+            gaussian.0,
+            robust.0,
+            tails.describe(),
+            default.0
+        );
+        assert!(robust.1 < gaussian.1, "{robust:?} against {gaussian:?}");
+        assert!(default.1 < robust.1, "{default:?} against {robust:?}");
+        assert!(tails.nu < 10.0 && tails.down_weighted > 0, "{tails:?}");
     }
 }
 

@@ -54,9 +54,6 @@ impl GyropathApp {
                         s.gps_noise
                     ));
                 ui.end_row();
-                ui.label("under");
-                ui.label(&s.gps_noise);
-                ui.end_row();
                 ui.label("along / cross");
                 ui.label(format!(
                     "{:.2} / {:.2} m",
@@ -75,6 +72,9 @@ impl GyropathApp {
                 ui.label(format!("{}", s.n_params));
                 ui.end_row();
             });
+            // Below the grid, wrapped: the law in words can be longer than
+            // the panel is wide (a grid's cell would widen the panel).
+            ui.add(egui::Label::new(format!("GPS error law: {}", s.gps_noise)).wrap());
             if s.phase == Phase::Done && !s.violations.is_empty() {
                 let red = egui::Color32::from_rgb(210, 60, 60);
                 ui.colored_label(red, "Not physical: this fit is no result.");

@@ -51,6 +51,16 @@ impl GyropathApp {
                  restricted marginal likelihood once step 2 has converged; off = set them here",
             )
             .changed();
+        if fit.auto_noise.gps {
+            changed |= ui
+                .checkbox(&mut fit.auto_noise.tails, "heavy tails from the ride")
+                .on_hover_text(
+                    "where the fit's innovations ask for it, a Student-t GPS error: each fix \
+                     weighted by how unlikely it is, so that a city's reflections do not \
+                     widen the wander for every fix; off = Gaussian",
+                )
+                .changed();
+        }
         if !fit.auto_noise.gps {
             changed |= ui
                 .add(

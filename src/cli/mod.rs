@@ -221,9 +221,22 @@ pub struct SettingsArgs {
     /// over TAU s) or `SIGMA,TAU,JITTER` (plus a jitter of JITTER m per fix).
     #[arg(long, alias = "gps-sigma", default_value = "auto")]
     pub gps_noise: String,
+    /// With `--gps-noise auto`: `auto` lets the ride choose heavy-tailed
+    /// (Student-t) GPS errors where its innovations ask for them, each fix
+    /// weighted by how unlikely it is (a city's reflections); `off` keeps
+    /// the Gaussian law.
+    #[arg(long, value_enum, default_value_t = TailsArg::Auto)]
+    pub gps_tails: TailsArg,
     /// Increment map: exact exponential or the paper's small-angle quaternion.
     #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
     pub increment: IncrementArg,
+}
+
+/// Whether the GPS error's heavy tails are learnt from the ride.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum TailsArg {
+    Auto,
+    Off,
 }
 
 fn split_list(s: &str) -> Vec<String> {
@@ -272,6 +285,7 @@ impl SettingsArgs {
             auto_noise: AutoNoise {
                 gps: self.gps_noise.trim() == "auto",
                 walk: self.bias_walk.trim() == "auto",
+                tails: self.gps_tails == TailsArg::Auto,
             },
             model: ModelSpec {
                 // The paper's model, then what the user listed (once each:

@@ -679,8 +679,8 @@ impl Reconstruction {
     /// the start), or none without an automatic GPS noise.
     fn reset_tails(&mut self, auto: AutoNoise) {
         self.tail_rounds = 0;
-        self.tails_done = !auto.gps;
-        if !auto.gps {
+        self.tails_done = !(auto.gps && auto.tails);
+        if self.tails_done {
             self.tails = None;
             self.tail_summary = None;
         }
@@ -701,11 +701,14 @@ impl Reconstruction {
 
     /// Whether a round of tail weights is still to run: after the noise
     /// search, with the GPS noise automatic (the tails are part of the GPS
-    /// error law the fit learns; `diagnose` ranks under the law as set).
+    /// error law the fit learns; `diagnose` ranks under the law as set),
+    /// and no robust loss (which answers the same tails; see `Model`).
     fn wants_tails(&self) -> bool {
         self.settings.auto_noise.gps
+            && self.settings.auto_noise.tails
             && self.noise_done
             && !self.tails_done
+            && self.model.robust_scale().is_none()
             && self.has_segments()
             && crate::limits::parameters(&self.model, &self.theta).is_empty()
     }
@@ -717,7 +720,7 @@ impl Reconstruction {
             Some(n) => n.apply(spec, auto),
             None => spec.clone(),
         };
-        if auto.gps {
+        if auto.gps && auto.tails {
             spec.gps_tails = self.tails.clone();
         }
         spec

@@ -68,6 +68,14 @@ pub struct AutoNoise {
     pub gps: bool,
     /// The bias-walk density of the segment prior.
     pub walk: bool,
+    /// With `gps`: the GPS error's heavy tails ([`tails`]), where the ride's
+    /// innovations ask for them. Off: a Gaussian law, as before the tails.
+    #[serde(default = "on")]
+    pub tails: bool,
+}
+
+fn on() -> bool {
+    true
 }
 
 /// The GPS noise is estimated by default, the bias walk is not: a
@@ -80,6 +88,7 @@ impl Default for AutoNoise {
         Self {
             gps: true,
             walk: false,
+            tails: true,
         }
     }
 }
@@ -88,6 +97,7 @@ impl AutoNoise {
     pub const OFF: AutoNoise = AutoNoise {
         gps: false,
         walk: false,
+        tails: false,
     };
 
     pub fn any(&self) -> bool {
