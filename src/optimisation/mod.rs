@@ -807,7 +807,7 @@ impl Reconstruction {
         let searched =
             Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
                 .ok()
-                .and_then(|m| noise::estimate(&m, &self.theta, &free, auto));
+                .and_then(|m| noise::estimate_again(&m, &self.theta, &free, auto));
         let summary = noise::tails::TailSummary {
             nu: fit.nu,
             gain: match (&self.tail_summary, first) {

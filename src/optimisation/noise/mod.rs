@@ -236,11 +236,50 @@ pub fn estimate(
     free: &[bool],
     which: AutoNoise,
 ) -> Option<NoiseEstimate> {
-    let windows = (model.fix_span() > WINDOWED_SPAN_S).then_some(Windows {
+    estimate_on(
+        model,
+        theta,
+        free,
+        which,
+        windows_for(model),
+        Start::Misfits,
+    )
+}
+
+/// [`estimate`] starting from the settings `model` already has: a search
+/// again after a small change of the law (the tails' weights of the next
+/// round), which the misfits' moments would restart tens of percent off.
+pub fn estimate_again(
+    model: &Model,
+    theta: &[f64],
+    free: &[bool],
+    which: AutoNoise,
+) -> Option<NoiseEstimate> {
+    estimate_on(
+        model,
+        theta,
+        free,
+        which,
+        windows_for(model),
+        Start::Current,
+    )
+}
+
+/// Where a search starts.
+#[derive(Clone, Copy, PartialEq)]
+enum Start {
+    /// From the misfits' moments ([`Model::gps_noise_guess`]).
+    Misfits,
+    /// From the model's own settings.
+    Current,
+}
+
+/// The windows a long ride is searched over (`None`: the whole ride).
+fn windows_for(model: &Model) -> Option<Windows> {
+    (model.fix_span() > WINDOWED_SPAN_S).then_some(Windows {
         count: WINDOWS,
         length_s: WINDOW_S,
-    });
-    estimate_on(model, theta, free, which, windows)
+    })
 }
 
 /// [`estimate`] over the whole ride, or over `windows` of it.
@@ -250,6 +289,7 @@ fn estimate_on(
     free: &[bool],
     which: AutoNoise,
     windows: Option<Windows>,
+    start: Start,
 ) -> Option<NoiseEstimate> {
     let mut spec = model.spec.clone();
     let heights = model.observes_gps_heights();
@@ -313,7 +353,8 @@ fn estimate_on(
             _ => Some((mean(|g| g.0), mean(|g| g.1), mean(|g| g.2))),
         }
     };
-    let horizontal = guess(false).filter(|_| which.gps);
+    let current = start == Start::Current && spec.gps_tau_s.is_some();
+    let horizontal = guess(false).filter(|_| which.gps && !current);
     if let Some((sigma, tau, jitter)) = horizontal {
         x0[0] = sigma.ln();
         x0[1] = tau.ln();
@@ -331,6 +372,7 @@ fn estimate_on(
     // true 1.5 m over 60 s; 1.47 m over 58 s with the heights' own).
     if which.gps
         && heights
+        && !current
         && let Some((sigma, tau, jitter)) = guess(true)
     {
         spec.gps_white_vertical_m = Some(jitter.max(BOUNDS[3].0));
@@ -640,7 +682,7 @@ mod tests {
         let (model, theta) = fit.into_parts();
         let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let which = AutoNoise::default();
-        let whole = estimate_on(&model, &theta, &free, which, None).unwrap();
+        let whole = estimate_on(&model, &theta, &free, which, None, Start::Misfits).unwrap();
         let windows = Windows {
             count: 3,
             length_s: 300.0,
@@ -657,7 +699,8 @@ mod tests {
             fixes < model.observed_fixes() * 4 / 5,
             "{fixes} fixes in the windows"
         );
-        let part = estimate_on(&model, &theta, &free, which, Some(windows)).unwrap();
+        let part =
+            estimate_on(&model, &theta, &free, which, Some(windows), Start::Misfits).unwrap();
         for (name, w, p) in [
             ("sigma", &whole.gps_sigma_m, &part.gps_sigma_m),
             ("tau", &whole.gps_tau_s, &part.gps_tau_s),
