@@ -223,9 +223,10 @@ pub struct SettingsArgs {
     pub gps_noise: String,
     /// With `--gps-noise auto`: `auto` lets the ride choose heavy-tailed
     /// (Student-t) GPS errors where its innovations ask for them, each fix
-    /// weighted by how unlikely it is (a city's reflections); `off` keeps
-    /// the Gaussian law.
-    #[arg(long, value_enum, default_value_t = TailsArg::Auto)]
+    /// weighted by how unlikely it is (a city's reflections: Berlin 9.34 ->
+    /// 7.55 m from its reference; on some simulated urban rides worse, see
+    /// docs/real-drives.md); `off` keeps the Gaussian law.
+    #[arg(long, value_enum, default_value_t = TailsArg::Off)]
     pub gps_tails: TailsArg,
     /// Increment map: exact exponential or the paper's small-angle quaternion.
     #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
