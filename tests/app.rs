@@ -697,3 +697,39 @@ fn a_wheel_distance_from_a_fit_file_is_picked_in_the_source_panel_and_removed() 
     loaded(&mut h, "GNSS speed");
     h.get_by_label("Wheel distance (FIT)...");
 }
+
+/// Ticking "heavy tails from the ride" after a fit and running again ends
+/// where a fit with the tails from the start does (Berlin: five rounds of
+/// weights, a Student-t law of about 1.6 degrees of freedom).
+#[test]
+fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
+    let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz/ride.csv");
+    let app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::file(berlin),
+        || {},
+    );
+    let mut h = harness(app);
+    let done = |a: &GyropathApp| {
+        a.snapshot
+            .as_ref()
+            .is_some_and(|s| s.phase == gyropath::optimisation::Phase::Done)
+            && !a.running
+    };
+    assert!(step_until(&mut h, Duration::from_secs(120), done));
+    h.state_mut().settings.fit.auto_noise.tails = true;
+    h.state_mut().apply(gyropath::app::Command::SettingsChanged);
+    h.state_mut().apply(gyropath::app::Command::Run);
+    assert!(step_until(&mut h, Duration::from_secs(5), |a| a.running));
+    assert!(step_until(&mut h, Duration::from_secs(120), done));
+    let law = h
+        .state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .gps_noise
+        .clone();
+    eprintln!("{law}");
+    assert!(law.contains("Student-t fixes (nu 1.6)"), "{law}");
+}

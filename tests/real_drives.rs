@@ -256,3 +256,39 @@ fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() 
         assert!(summary.nu < 5.0 && summary.rounds >= 1, "{summary:?}");
     }
 }
+
+/// Asking for the tails after a finished fit (the app's checkbox) ends
+/// where a fit that asked from the start does: the same rounds, the same
+/// path within centimetres.
+#[test]
+fn tails_asked_for_after_the_fit_end_where_a_fresh_fit_does() {
+    let folder = shared_real().join("smartloc-berlin-potsdamer-platz");
+    let d = open(&folder);
+    let heavy = FitSettings {
+        auto_noise: AutoNoise {
+            tails: true,
+            ..AutoNoise::default()
+        },
+        ..FitSettings::default()
+    };
+    let (fresh, fresh_ref) = fit(&d, heavy.clone());
+    let mut later = Reconstruction::new(d.signals.clone(), FitSettings::default()).expect("fit");
+    later.finish();
+    later.apply_settings(heavy).expect("settings");
+    later.finish();
+    let later_ref = reference::compare(later.model(), later.params(), &d.reference, &d.matched);
+    let rounds = |f: &Reconstruction| f.noise().and_then(|n| n.gps_tails.clone());
+    eprintln!(
+        "fresh {:.3} m {:?}; later {:.3} m {:?}",
+        fresh_ref.horizontal.rms_m,
+        rounds(&fresh),
+        later_ref.horizontal.rms_m,
+        rounds(&later)
+    );
+    assert!(
+        (fresh_ref.horizontal.rms_m - later_ref.horizontal.rms_m).abs() < 0.1,
+        "fresh {} m, later {} m",
+        fresh_ref.horizontal.rms_m,
+        later_ref.horizontal.rms_m
+    );
+}
