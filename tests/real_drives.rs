@@ -221,7 +221,7 @@ fn real_drives_against_their_references() {
 
 /// `--gps-tails auto` on the real drives: the Student-t wander is chosen by
 /// the innovations' likelihood on both and lowers the error to the
-/// reference (measured: Berlin 9.34 -> 7.55 m, comma 1.24 -> 1.12 m); the
+/// reference (measured: Berlin 9.34 -> 8.26 m, comma 1.24 -> 0.99 m); the
 /// rule sees no reference. Printed beside the Gaussian default.
 #[test]
 fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() {
@@ -258,7 +258,7 @@ fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() 
 }
 
 /// Asking for the tails after a finished fit (the app's checkbox) ends
-/// where a fit that asked from the start does: the same rounds, the same
+/// where a fit that asked from the start does: the same weights, the same
 /// path within centimetres.
 #[test]
 fn tails_asked_for_after_the_fit_end_where_a_fresh_fit_does() {

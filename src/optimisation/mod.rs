@@ -243,10 +243,10 @@ pub struct Reconstruction {
     tails_done: bool,
 }
 
-/// Rounds of tail weights at most. Each costs a noise search and a step 2;
-/// the weights settle within 5 % in 4-7 rounds on the city rides measured
-/// (Berlin, `simulate --gps urban` and `city`), and the path moves by
-/// centimetres after the fifth.
+/// Rounds of tail weights at most. Each costs a step 2; under the Gaussian
+/// search's noise settings the weights settle within 5 % in one or two
+/// rounds on the rides measured (Berlin, comma, `simulate --gps urban` and
+/// `city`).
 const MAX_TAIL_ROUNDS: usize = 6;
 
 /// The tail weights count as settled when no fix's noise factor moved by
@@ -675,15 +675,13 @@ impl Reconstruction {
         Some(self.report(phase, outcome, stage_done))
     }
 
-    /// The tails learnt anew after the noise search (their weights kept as
-    /// the start), or none without an automatic GPS noise.
+    /// The tails learnt anew after the next noise search (which is searched
+    /// under the Gaussian law, as a fresh fit's is), if asked for.
     fn reset_tails(&mut self, auto: AutoNoise) {
         self.tail_rounds = 0;
         self.tails_done = !(auto.gps && auto.tails);
-        if self.tails_done {
-            self.tails = None;
-            self.tail_summary = None;
-        }
+        self.tails = None;
+        self.tail_summary = None;
     }
 
     /// Whether the noise search is still to run: asked for, not yet run on
@@ -770,9 +768,9 @@ impl Reconstruction {
         self.report(Phase::Noise, outcome, true)
     }
 
-    /// A round of the tails' expectation-maximisation (see [`noise::tails`]):
-    /// the weights at their expectation given the fit's innovations, the
-    /// noise searched again under them and back to step 2; or, where the
+    /// A round of the tails' weights (see [`noise::tails`]): the weights at
+    /// their expectation given the fit's innovations and back to step 2,
+    /// under the noise settings the Gaussian search chose; or, where the
     /// ride's innovations do not ask for heavy tails or the weights have
     /// settled, the fit is done.
     fn estimate_tails(&mut self) -> IterationReport {
@@ -799,15 +797,6 @@ impl Reconstruction {
         let first = self.tails.is_none();
         self.tail_rounds += 1;
         self.tails = Some(tails);
-        let auto = self.settings.auto_noise;
-        let free = self
-            .model
-            .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-        let spec = self.effective_spec(&self.settings.model, auto);
-        let searched =
-            Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
-                .ok()
-                .and_then(|m| noise::estimate_again(&m, &self.theta, &free, auto));
         let summary = noise::tails::TailSummary {
             nu: fit.nu,
             gain: match (&self.tail_summary, first) {
@@ -821,13 +810,10 @@ impl Reconstruction {
                 .map_or(0, |t| t.scale.iter().filter(|&&f| f >= 2.0).count()),
         };
         self.tail_summary = Some(summary);
-        if let Some(n) = searched {
-            outcome.evaluations = n.evaluations;
-            self.noise = Some(self.noise_found(n));
-        } else if let Some(n) = self.noise.take() {
+        if let Some(n) = self.noise.take() {
             self.noise = Some(self.noise_found(n));
         }
-        let spec = self.effective_spec(&self.settings.model, auto);
+        let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
         if let Ok(model) =
             Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
         {
