@@ -14,6 +14,16 @@ fn harness(app: GyropathApp) -> Harness<'static, GyropathApp> {
         .build_ui_state(|ui, app: &mut GyropathApp| app.ui(ui), app)
 }
 
+/// The GPS error law the fit panel names.
+fn gps_law(h: &Harness<'static, GyropathApp>) -> String {
+    h.state()
+        .snapshot
+        .as_ref()
+        .expect("snapshot")
+        .gps_noise
+        .clone()
+}
+
 /// Step the UI until `done` holds or `timeout` passes (the worker runs on its own thread).
 fn step_until(
     h: &mut Harness<'static, GyropathApp>,
@@ -74,13 +84,7 @@ fn run_fits_the_sample_and_the_cost_label_falls() {
     // The fit panel and the model history's row both show the fit RMS, and
     // the panel says which GPS error law it is measured under.
     assert_eq!(h.get_all_by_label(&format!("{rms:.3} m")).count(), 2);
-    let law = h
-        .state()
-        .snapshot
-        .as_ref()
-        .expect("snapshot")
-        .gps_noise
-        .clone();
+    let law = gps_law(&h);
     assert!(law.contains("GPS"), "{law}");
     h.get_by_label(&format!("GPS error law: {law}"));
     // The finished fit says how sure it is: a band along the path, a band on
@@ -723,13 +727,7 @@ fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
     h.state_mut().apply(gyropath::app::Command::Run);
     assert!(step_until(&mut h, Duration::from_secs(5), |a| a.running));
     assert!(step_until(&mut h, Duration::from_secs(120), done));
-    let law = h
-        .state()
-        .snapshot
-        .as_ref()
-        .expect("snapshot")
-        .gps_noise
-        .clone();
+    let law = gps_law(&h);
     eprintln!("{law}");
     assert!(law.contains("Student-t fixes (nu 1.9)"), "{law}");
 }

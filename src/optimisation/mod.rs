@@ -752,15 +752,7 @@ impl Reconstruction {
         };
         if let Some(n) = found {
             self.noise = Some(self.noise_found(n));
-            let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
-            if let Ok(model) =
-                Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
-            {
-                self.theta = model.carry_over(&self.model, &self.theta);
-                self.model = model;
-                outcome.cost = self.model.cost(&self.theta);
-                outcome.accepted = true;
-            }
+            self.rebuild(&mut outcome);
         }
         self.iteration += 1;
         self.phase = Phase::Step2;
@@ -813,6 +805,16 @@ impl Reconstruction {
         if let Some(n) = self.noise.take() {
             self.noise = Some(self.noise_found(n));
         }
+        self.rebuild(&mut outcome);
+        self.phase = Phase::Step2;
+        self.phase_iterations[1] = 0;
+        self.report(Phase::Noise, outcome, true)
+    }
+
+    /// The model rebuilt under the settings now in force (the noise and
+    /// tails estimated), the parameters carried over; `outcome` takes the
+    /// cost there.
+    fn rebuild(&mut self, outcome: &mut StepOutcome) {
         let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
         if let Ok(model) =
             Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
@@ -822,9 +824,6 @@ impl Reconstruction {
             outcome.cost = self.model.cost(&self.theta);
             outcome.accepted = true;
         }
-        self.phase = Phase::Step2;
-        self.phase_iterations[1] = 0;
-        self.report(Phase::Noise, outcome, true)
     }
 
     fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
