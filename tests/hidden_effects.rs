@@ -26,12 +26,7 @@ fn settings(effects: &[&str]) -> FitSettings {
 
 /// Path error against the truth of a full fit, RMS over all rows: horizontal and 3-D.
 fn truth_error(sim: &SimulatedRide, sig: &Arc<Signals>, effects: &[&str]) -> (f64, f64) {
-    truth_error_under(sim, sig, settings(effects))
-}
-
-/// [`truth_error`] of a fit under `settings`.
-fn truth_error_under(sim: &SimulatedRide, sig: &Arc<Signals>, settings: FitSettings) -> (f64, f64) {
-    let mut fit = Reconstruction::new(sig.clone(), settings).expect("fit");
+    let mut fit = Reconstruction::new(sig.clone(), settings(effects)).expect("fit");
     fit.finish();
     truth_error_of(sim, sig, &fit)
 }

@@ -786,15 +786,12 @@ impl Reconstruction {
             self.phase = Phase::Done;
             return self.report(Phase::Noise, outcome, true);
         };
-        let first = self.tails.is_none();
         self.tail_rounds += 1;
         self.tails = Some(tails);
         let summary = noise::tails::TailSummary {
             nu: fit.nu,
-            gain: match (&self.tail_summary, first) {
-                (Some(s), false) => s.gain,
-                _ => fit.gain,
-            },
+            // The evidence that chose the tails: the first round's.
+            gain: self.tail_summary.as_ref().map_or(fit.gain, |s| s.gain),
             rounds: self.tail_rounds,
             down_weighted: self
                 .tails

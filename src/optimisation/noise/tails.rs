@@ -36,14 +36,14 @@
 //! the Gaussian (`nu` infinite) with its own `c`. Measured on every ride with
 //! a reference (docs/real-drives.md): open-sky simulations gain 0.3-0.7 in
 //! `2 ln L` (the Gaussian stays, at no cost), the comma drive 28, the urban
-//! and city simulations 150-500, Berlin 126, each with `nu` near 2-3.5.
+//! and city simulations 112-691, Berlin 126, each with `nu` near 2-4.
 
 use crate::model::{GpsTails, Model, ModelSpec};
 
 /// `2 ln L` that the t law must gain over the Gaussian before the fit takes
 /// it: the 0.1 % point of a chi-squared of one degree of freedom (the one
-/// extra parameter, `nu`). Strict, because each round costs a noise search
-/// and a step 2, and a Gaussian ride must not pay for them by chance.
+/// extra parameter, `nu`). Strict, because each round costs a step 2, and
+/// a Gaussian ride must not pay for them, nor lose its Gaussian fit, by chance.
 pub const SIGNIFICANT_GAIN: f64 = 10.83;
 
 /// The range of `nu` searched (below 1 the law has no mean; above 200 it is
@@ -191,30 +191,18 @@ pub fn innovations(model: &Model, theta: &[f64]) -> Option<Vec<Option<f64>>> {
     )
     .ok()?;
     let path = unit.sparse_path(theta, unit.residual_rows(theta));
-    let misfits = unit.misfits(theta, &path);
-    let links = unit.obs_plan(theta).links;
     let sig = &unit.signals;
-    let mut z = vec![0.0; unit.observations.len()];
     let mut q: Vec<Option<f64>> = vec![None; sig.fixes.len()];
     let mut axes = vec![0u8; sig.fixes.len()];
-    for (k, ((o, m), l)) in unit
-        .observations
-        .iter()
-        .zip(&misfits)
-        .zip(&links)
-        .enumerate()
-    {
-        let z_prev = l.prev.map_or(0.0, |j| z[j]);
-        z[k] = l.alpha * z_prev + l.kappa * m.metres;
+    for (o, m) in unit.observations.iter().zip(unit.misfits(theta, &path)) {
         if o.baro || o.axis == 2 {
             continue;
         }
-        let e = l.u * m.metres + l.v * z_prev;
         let i = *sig.fix_at_row.get(o.row)? as usize;
         let (Some(slot), Some(count)) = (q.get_mut(i), axes.get_mut(i)) else {
             continue;
         };
-        *slot = Some(slot.unwrap_or(0.0) + e * e);
+        *slot = Some(slot.unwrap_or(0.0) + m.white * m.white);
         *count += 1;
     }
     for (slot, count) in q.iter_mut().zip(axes) {
@@ -239,17 +227,16 @@ pub fn estimate(model: &Model, theta: &[f64], keep: bool) -> Option<(TailFit, Gp
         return None;
     }
     let nu = fit.nu;
-    let mut factors: Vec<f64> = seen
-        .iter()
-        .map(|qk| ((nu + qk) / (nu + 2.0)).sqrt())
-        .collect();
+    // `1 / sqrt(w_k)` of a fix whose innovation's squared norm is `qk`.
+    let factor = |qk: f64| ((nu + qk) / (nu + 2.0)).sqrt();
+    let mut factors: Vec<f64> = seen.iter().map(|&qk| factor(qk)).collect();
     let median = crate::statistics::median(&mut factors);
     if !(median.is_finite() && median > 0.0) {
         return None;
     }
     let scale = q
         .iter()
-        .map(|qk| qk.map_or(1.0, |qk| ((nu + qk) / (nu + 2.0)).sqrt() / median))
+        .map(|qk| qk.map_or(1.0, |qk| factor(qk) / median))
         .collect();
     Some((fit, GpsTails { nu, scale }))
 }
