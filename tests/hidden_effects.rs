@@ -164,7 +164,7 @@ fn gyro_scale_is_found_and_the_yaw_factor_recovered() {
 /// Hidden outliers: `diagnose` puts `gps_outliers` first, and its robust
 /// loss beats the default's Gaussian law. A fit that learns heavy tails of
 /// its own (`--gps-tails auto`: Student-t, where the innovations ask for
-/// them) takes the outliers better still (seeds 45, 46: 1.85 and 1.41 m from
+/// them) takes the outliers better still (seeds 45, 46: 1.78 and 1.34 m from
 /// the truth, against 2.07 and 1.54 m with the robust loss and 2.29 and
 /// 1.78 m Gaussian).
 #[test]

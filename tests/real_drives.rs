@@ -221,7 +221,7 @@ fn real_drives_against_their_references() {
 
 /// `--gps-tails auto` on the real drives: the Student-t wander is chosen by
 /// the innovations' likelihood on both and lowers the error to the
-/// reference (measured: Berlin 9.34 -> 8.26 m, comma 1.24 -> 0.99 m); the
+/// reference (measured: Berlin 9.34 -> 7.85 m, comma 1.24 -> 0.93 m); the
 /// rule sees no reference. Printed beside the Gaussian default.
 #[test]
 fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() {
@@ -248,7 +248,7 @@ fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() 
             summary.describe()
         );
         assert!(
-            tails.horizontal.rms_m < 0.95 * gaussian.horizontal.rms_m,
+            tails.horizontal.rms_m < 0.9 * gaussian.horizontal.rms_m,
             "{name}: {} m with the tails against {} m",
             tails.horizontal.rms_m,
             gaussian.horizontal.rms_m

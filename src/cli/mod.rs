@@ -224,7 +224,7 @@ pub struct SettingsArgs {
     /// With `--gps-noise auto`: `auto` lets the ride choose heavy-tailed
     /// (Student-t) GPS errors where its innovations ask for them, each fix
     /// weighted by how unlikely it is (a city's reflections: Berlin 9.34 ->
-    /// 8.26 m from its reference; some simulated urban rides end further
+    /// 7.85 m from its reference; some simulated urban rides end further
     /// from their truth, see docs/real-drives.md); `off` keeps the Gaussian law.
     #[arg(long, value_enum, default_value_t = TailsArg::Off)]
     pub gps_tails: TailsArg,

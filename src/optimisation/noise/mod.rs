@@ -81,10 +81,10 @@ pub struct AutoNoise {
 /// 2). `--bias-walk auto` asks for it.
 ///
 /// The heavy tails are not learnt by default either. They bring both real
-/// drives with a reference nearer (Berlin 9.34 -> 8.26 m, comma 1.24 ->
-/// 0.99 m), but the rule that chooses them (their likelihood on the
+/// drives with a reference nearer (Berlin 9.34 -> 7.85 m, comma 1.24 ->
+/// 0.93 m), but the rule that chooses them (their likelihood on the
 /// innovations) also chooses them on simulated urban rides where they hurt
-/// (seeds 11 and 12: 2.67 and 1.62 m from the truth -> 2.92 and 2.01 m), past
+/// (seeds 11 and 12: 2.67 and 1.62 m from the truth -> 3.01 and 2.15 m), past
 /// the 5 % that no simulated ride may lose. `--gps-tails auto` asks for
 /// them (docs/real-drives.md).
 impl Default for AutoNoise {
