@@ -703,8 +703,8 @@ fn a_wheel_distance_from_a_fit_file_is_picked_in_the_source_panel_and_removed() 
 }
 
 /// Ticking "heavy tails from the ride" after a fit and running again ends
-/// where a fit with the tails from the start does (Berlin: two rounds of
-/// weights, a Student-t law of about 1.9 degrees of freedom).
+/// where a fit with the tails from the start does (Berlin: three rounds of
+/// weights, a Student-t law of about 1.8 degrees of freedom).
 #[test]
 fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
     let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))

@@ -244,9 +244,9 @@ pub struct Reconstruction {
 }
 
 /// Rounds of tail weights at most. Each costs a step 2; under the Gaussian
-/// search's noise settings the weights settle within 5 % in one or two
-/// rounds on the rides measured (Berlin, comma, `simulate --gps urban` and
-/// `city`).
+/// search's noise settings the weights settle within 5 % in one to three
+/// rounds on the rides measured (Berlin 3, comma 2, `simulate --gps urban`
+/// and `city` 1-2).
 const MAX_TAIL_ROUNDS: usize = 6;
 
 /// The tail weights count as settled when no fix's noise factor moved by

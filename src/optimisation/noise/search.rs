@@ -104,11 +104,11 @@ pub(super) const NEWTON_GAIN: f64 = 0.2;
 /// `|H| s = -g` (`|H|`: eigenvalues by magnitude, floored, so a saddle or a
 /// flat direction still steps downhill), at most [`MAX_NEWTON_STEP`] per
 /// coordinate, tried at 1 and 2 times its length side by side (and at 4
-/// where 2 beat 1), and at a half and a quarter if none of those lowers `f`. It stops after a step
-/// that gains less than [`NEWTON_GAIN`] where the step was below
-/// [`NEWTON_DONE`] or, the stencil curving well in every direction
-/// ([`WEAK_CURVATURE`]), the quadratic model, too, expected less than
-/// [`NEWTON_GAIN`]: then what is left to gain is a fraction of one unit of
+/// where 2 beat 1), and at a half and a quarter if none of those lowers
+/// `f`. It stops after a step that gains less than [`NEWTON_GAIN`] where
+/// the step was below [`NEWTON_DONE`] or, the stencil curving well in
+/// every direction ([`WEAK_CURVATURE`]), the quadratic model, too, expected
+/// less than [`NEWTON_GAIN`]: then what is left to gain is a fraction of one unit of
 /// `-2 ln L`, a few tenths of each setting's 1-sigma (on the GPS wander's
 /// ridge `sigma^2 / tau` the steps went on back and forth by 0.1-0.17 in
 /// `ln tau`, whose 1-sigma is 0.37, for more rounds: 66 likelihoods

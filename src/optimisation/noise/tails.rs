@@ -22,7 +22,7 @@
 //! below 1 where the reflections widened the Gaussian: 0.47 on Berlin,
 //! 0.56 on the comma drive, 0.29-0.65 on the simulated rides that take it),
 //! refits step 2 under them and takes the weights again, round after round
-//! until they settle (one or two rounds). Weights taken as if `c` were 1
+//! until they settle (one to three rounds). Weights taken as if `c` were 1
 //! (session 28) were those of a law wider than the one fitted, and
 //! discounted the reflections less: Berlin 8.26 m from its reference
 //! instead of 7.85 m, comma 0.99 m instead of 0.93 m (docs/real-drives.md).
@@ -327,8 +327,6 @@ mod tests {
         );
     }
 
-    /// The t law's likelihood with the scale at its maximum is never below
-    /// the same law at a scale off by 10 % either way.
     #[test]
     fn the_noise_factors_do_not_depend_on_the_innovations_units() {
         // Innovations whitened under a Gaussian four times too wide read a
@@ -355,6 +353,8 @@ mod tests {
         assert!(a.iter().all(|&f| f > 0.5));
     }
 
+    /// The t law's likelihood with the scale at its maximum is never below
+    /// the same law at a scale off by 10 % either way.
     #[test]
     fn the_scale_maximises_the_t_likelihood() {
         let q = t_draws(2.0, 500, 9);
