@@ -774,6 +774,18 @@ fn the_summary_gives_the_bias_the_sensor_had_not_only_its_constant_part() {
         r["bias_total"][0].is_null(),
         "a yaw-rate sensor has no roll bias"
     );
+    // The JSON report holds the segment lengths' likelihoods even without
+    // --verbose (they are computed only where something shows them), the
+    // best at 0 and the others above it.
+    let preference = r["segment_preference"].as_array().unwrap();
+    assert_eq!(preference.len(), 5, "{preference:?}");
+    assert!(
+        preference.iter().any(|p| p[1].as_f64() == Some(0.0))
+            && preference.iter().all(|p| p[1].as_f64().unwrap() >= 0.0),
+        "{preference:?}"
+    );
+    // Without --verbose the summary does not show them.
+    assert!(!text.contains("segments  "), "{text}");
 }
 
 #[test]

@@ -622,6 +622,7 @@ impl Worker {
             ExportKind::ReportJson => {
                 // The command line's report: sigmas, and the reference when one is loaded.
                 let (report, _) = pipeline::report(fit, 0.0, false, ride.reference.as_deref());
+                let report = report.with_segment_preference(fit);
                 write_atomically(path, protect, |w| write_json(w, &report))
             }
             ExportKind::ReportHtml => {

@@ -126,6 +126,11 @@ fn fit_one(
         true,
         against.as_ref(),
     );
+    // The JSON report holds the segment lengths' likelihoods.
+    let report = match out_dir {
+        Some(_) => report.with_segment_preference(&fit),
+        None => report,
+    };
     if let Some(dir) = out_dir {
         write_path(
             &dir.join(format!("{stem}-path.csv")),

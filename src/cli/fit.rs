@@ -149,12 +149,15 @@ pub fn fit(args: &FitArgs) -> Result<()> {
         b.finish_and_clear();
     }
     physical(&fit)?;
-    let (report, uncertainty) = pipeline::report(
+    let (mut report, uncertainty) = pipeline::report(
         &fit,
         started.elapsed().as_secs_f64(),
         args.out.is_some() || args.json.is_some(),
         against.as_ref(),
     );
+    if args.json.is_some() || verbose {
+        report = report.with_segment_preference(&fit);
+    }
     if let (Some(out), Some(format)) = (&args.out, path_format) {
         write_path(out, format, ride, &fit, uncertainty.as_ref())?;
     }
