@@ -6,9 +6,10 @@ use std::sync::Arc;
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use gyropath::diagnosis::{Folds, diagnose};
+use gyropath::effects::Role;
 use gyropath::import::parse;
 use gyropath::model::{Model, ModelSpec};
-use gyropath::optimisation::{FitSettings, Reconstruction};
+use gyropath::optimisation::{FitSettings, Reconstruction, noise};
 use gyropath::signals::Signals;
 use gyropath::simulation::{SimConfig, simulate};
 
@@ -64,6 +65,18 @@ fn bench(c: &mut Criterion) {
             fit.finish();
             g.bench_function(format!("uncertainty/{label}"), |b| {
                 b.iter(|| fit.model().uncertainty(black_box(fit.params())).unwrap())
+            });
+            // One likelihood of the noise search (dozens per fit; issue 29):
+            // the chain solver's forward pass with its log-determinant, under
+            // a correlated GPS error (a wander per axis passed from fix to fix).
+            let model = fit.model();
+            let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+            let base = model.chain_system(fit.params(), &free).unwrap();
+            g.bench_function(format!("noise_likelihood/{label}"), |b| {
+                b.iter(|| {
+                    noise::neg2_log_likelihood(model, &base, fit.params(), &free, &model.spec)
+                        .unwrap()
+                })
             });
         }
     }

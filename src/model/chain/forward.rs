@@ -85,6 +85,24 @@ pub(super) struct Work {
     /// Rows waiting to be folded in.
     pub(super) pending: Vec<Vec<f64>>,
     pub(super) origin: Vector3<f64>,
+    /// Buffers [`Work::pass_wander`] reuses from fix to fix: a fix's rows
+    /// were a tenth of the solver's time in allocations alone.
+    pub(super) scratch: Scratch,
+}
+
+/// Reused buffers of the forward pass (see [`Work::pass_wander`]).
+#[derive(Default)]
+pub(super) struct Scratch {
+    /// The small array a wander is passed on in, column-major.
+    array: Vec<f64>,
+    /// The Householder vector of [`triangularise_in`].
+    reflector: Vec<f64>,
+    /// Pending rows that read the wander being passed on.
+    reading: Vec<Vec<f64>>,
+    /// Rows folded in, for the next rows to be written into.
+    spare: Vec<Vec<f64>>,
+    /// The array [`Work::compress`] triangularises, column-major.
+    stack: Vec<f64>,
 }
 
 impl Work {
@@ -133,18 +151,35 @@ impl Work {
     /// Fold the pending rows into an upper-triangular `n x (n + 1)` array.
     pub(super) fn compress(&mut self) {
         let n = self.n();
-        let nr = self.rows.nrows() + self.pending.len();
-        let mut stack = DMatrix::<f64>::zeros(nr.max(n), n + 1);
-        stack
-            .view_mut((0, 0), (self.rows.nrows(), n + 1))
-            .copy_from(&self.rows);
-        for (i, row) in self.pending.drain(..).enumerate() {
-            for (k, v) in row.into_iter().enumerate() {
-                stack[(self.rows.nrows() + i, k)] = v;
-            }
+        let tri = self.rows.nrows();
+        let nr = (tri + self.pending.len()).max(n);
+        let Scratch {
+            reflector,
+            spare,
+            stack,
+            ..
+        } = &mut self.scratch;
+        stack.clear();
+        stack.resize(nr * (n + 1), 0.0);
+        for (k, col) in self.rows.column_iter().enumerate() {
+            stack[k * nr..k * nr + tri].copy_from_slice(col.as_slice());
         }
-        triangularise(&mut stack, n, self.rows.nrows());
-        self.rows = block(&stack, (0, 0), (n, n + 1));
+        for (i, row) in self.pending.drain(..).enumerate() {
+            for (k, &v) in row.iter().enumerate() {
+                stack[k * nr + tri + i] = v;
+            }
+            spare.push(row);
+        }
+        triangularise_in(stack, nr, n, tri, reflector);
+        self.rows = DMatrix::from_fn(n, n + 1, |i, k| stack[k * nr + i]);
+    }
+
+    /// A zero row of `len` entries, in a buffer folded in earlier where there is one.
+    pub(super) fn row(&mut self, len: usize) -> Vec<f64> {
+        let mut row = self.scratch.spare.pop().unwrap_or_default();
+        row.clear();
+        row.resize(len, 0.0);
+        row
     }
 
     /// Insert `m` zero columns at column `at` (the array and the pending rows).
@@ -240,40 +275,55 @@ impl Work {
     /// a new column, a compression and a permuted copy of the whole array.
     pub(super) fn pass_wander(&mut self, c: usize, o: usize, r: Vec<f64>, h: Vec<f64>) -> Op {
         let n = self.n();
-        let (reading, rest): (Vec<_>, Vec<_>) = std::mem::take(&mut self.pending)
-            .into_iter()
-            .partition(|p| p[c] != 0.0);
-        self.pending = rest;
-        let nl = c + 1 + reading.len() + 2;
-        let mut a = DMatrix::<f64>::zeros(nl, n + 2);
-        let put = |a: &mut DMatrix<f64>, i: usize, at: &dyn Fn(usize) -> f64| {
-            a[(i, 0)] = at(c);
-            for k in (0..=n).filter(|&k| k != c) {
-                a[(i, k + 1)] = at(k);
+        let Scratch {
+            array,
+            reflector,
+            reading,
+            spare,
+            ..
+        } = &mut self.scratch;
+        // The rows that read the old wander leave `pending` (the others keep
+        // their order), and come back below with the new rows' contents.
+        reading.clear();
+        reading.extend(self.pending.extract_if(.., |p| p[c] != 0.0));
+        reading.push(r);
+        let nl = c + 1 + reading.len() + 1;
+        let nc = n + 2;
+        array.clear();
+        array.resize(nl * nc, 0.0);
+        // Row `i` of the column-major `a`, `a[(i, k)]` at `k * nl + i`, from
+        // the entries `at(k)` over the array's columns: the old wander's first.
+        fn put(a: &mut [f64], nl: usize, c: usize, i: usize, at: impl Iterator<Item = f64>) {
+            for (k, v) in at.enumerate() {
+                let to = if k == c { 0 } else { k + 1 };
+                a[to * nl + i] = v;
             }
-        };
+        }
         for i in 0..=c {
-            put(&mut a, i, &|k| self.rows[(i, k)]);
+            put(array, nl, c, i, self.rows.row(i).iter().copied());
         }
-        for (i, p) in reading.iter().chain([&r]).enumerate() {
-            put(&mut a, c + 1 + i, &|k| p[k]);
+        for (i, p) in reading.iter().enumerate() {
+            put(array, nl, c, c + 1 + i, p.iter().copied());
         }
-        for (k, v) in h.into_iter().enumerate() {
-            a[(nl - 1, k)] = v;
+        for (k, &v) in h.iter().enumerate() {
+            array[k * nl + nl - 1] = v;
         }
-        triangularise(&mut a, c + 2, 0);
+        spare.push(h);
+        triangularise_in(array, nl, c + 2, 0, reflector);
         for i in 0..=c {
             for k in 0..=n {
-                self.rows[(i, k)] = a[(i + 1, k + 1)];
+                self.rows[(i, k)] = array[(k + 1) * nl + i + 1];
             }
         }
-        for i in c + 2..nl {
-            self.pending.push((0..=n).map(|k| a[(i, k + 1)]).collect());
+        for (i, mut row) in (c + 2..nl).zip(reading.drain(..)) {
+            row.clear();
+            row.extend((0..=n).map(|k| array[(k + 1) * nl + i]));
+            self.pending.push(row);
         }
         let prev = std::mem::replace(&mut self.wander[c], o);
         Op::Eliminate {
             what: Unknown::Wander(prev),
-            rows: block(&a, (0, 0), (1, a.ncols())),
+            rows: DMatrix::from_fn(1, nc, |_, k| array[k * nl]),
             rest: self.front(),
         }
     }
@@ -300,9 +350,21 @@ impl Work {
 /// contiguous slices, so the inner loops vectorise.
 pub(super) fn triangularise(a: &mut DMatrix<f64>, n: usize, tri: usize) {
     let nr = a.nrows();
-    let nc = a.ncols();
-    let data = a.as_mut_slice();
-    let mut v = vec![0.0; nr];
+    triangularise_in(a.as_mut_slice(), nr, n, tri, &mut Vec::new());
+}
+
+/// [`triangularise`] of the column-major `nr`-row array `data`, with the
+/// Householder vector in `v` (a buffer the caller may reuse).
+pub(super) fn triangularise_in(
+    data: &mut [f64],
+    nr: usize,
+    n: usize,
+    tri: usize,
+    v: &mut Vec<f64>,
+) {
+    let nc = data.len() / nr.max(1);
+    v.clear();
+    v.resize(nr, 0.0);
     for j in 0..n.min(nr) {
         let (head, tail) = data.split_at_mut((j + 1) * nr);
         let col = &head[j * nr..];
@@ -416,6 +478,7 @@ impl ChainSystem {
             rows: DMatrix::zeros(0, 7 + ng),
             pending: Vec::new(),
             origin: Vector3::zeros(),
+            scratch: Scratch::default(),
         };
         let mut ops: Vec<Op> = Vec::new();
         // Heavy rows defining a wander (each adds exactly its weight squared to the determinant).
@@ -532,7 +595,7 @@ impl ChainSystem {
             // The row of d x_o in the current unknowns: (U x (p - c) + T)_a,
             // its block's explicit entries and the globals.
             let n = work.n();
-            let mut r = vec![0.0; n + 1];
+            let mut r = work.row(n + 1);
             let h = &lin.h[o];
             // h = (x x e_a, -e_a, e_a): the axis is where the last three entries are non-zero.
             if let Some(a) = (0..3).find(|&a| h[6 + a] != 0.0) {
@@ -569,7 +632,7 @@ impl ChainSystem {
             // heavy against the row that will read it: a constraint, not a prior.
             let wander = self.next_in_chain[o].map(|next| {
                 let w = WANDER_PIN * (1.0 + lin.slope[next].1.abs());
-                let mut c = vec![0.0; n + 2];
+                let mut c = work.row(n + 2);
                 c[0] = w;
                 for (k, d) in r[..n].iter().enumerate() {
                     c[k + 1] = -w * link.kappa * d;
