@@ -19,6 +19,7 @@
 
 use rayon::prelude::*;
 
+use crate::effects::Role;
 use crate::model::Model;
 use crate::optimisation::{FitError, FitSettings, Reconstruction};
 
@@ -346,14 +347,35 @@ pub fn held_out(
     let last = folds.block(t0 + sig.duration(), t0);
     let fold_at = |t: f64| folds.fold_of_block(folds.block(t, t0), last);
     let fold_of: Vec<Option<usize>> = sig.fixes.iter().map(|f| fold_at(f.t)).collect();
+    let long = sig.len() > SEQUENTIAL_FOLDS_ROWS;
+    // Every fold's refit starts at `theta`, where the path's derivatives are
+    // the full ride's: one linearisation of it serves each fold's first
+    // iteration (its own fixes picked out, `Model::chain_system_within`),
+    // instead of a sweep of the ride per fold. Not on long rides, whose
+    // validation holds one refit's memory at a time.
+    let shared = (!long)
+        .then(|| {
+            let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+            model.chain_system(theta, &free)
+        })
+        .flatten();
     let refit_all = || -> Vec<Result<FoldResult, FitError>> {
         (0..folds.k)
             .into_par_iter()
             .filter(|&f| fold_of.contains(&Some(f)))
             .map(|f| {
-                let train = model
-                    .withholding(|t| fold_at(t) != Some(f) && !folds.guarded(t, t0, last, f))?;
-                let mut fit = Reconstruction::resume(train, theta.to_vec(), settings.clone())?;
+                let keep = |t: f64| fold_at(t) != Some(f) && !folds.guarded(t, t0, last, f);
+                let train = model.withholding(keep)?;
+                let kept: Vec<bool> = model.observations.iter().map(|o| keep(o.t)).collect();
+                let start = shared
+                    .as_ref()
+                    .and_then(|base| train.chain_system_within(base, theta, &kept));
+                let mut fit = match start {
+                    Some(start) => {
+                        Reconstruction::resume_from(train, theta.to_vec(), settings.clone(), start)?
+                    }
+                    None => Reconstruction::resume(train, theta.to_vec(), settings.clone())?,
+                };
                 fit.finish();
                 let iterations = fit.history().len();
                 Ok(FoldResult {
@@ -369,7 +391,7 @@ pub fn held_out(
     // (about 125 MB for 6 hours): on rides this long the folds run one at a
     // time, so that memory is bounded by one refit, not by the core count.
     let results = match rayon::ThreadPoolBuilder::new().num_threads(1).build() {
-        Ok(pool) if sig.len() > SEQUENTIAL_FOLDS_ROWS => pool.install(refit_all),
+        Ok(pool) if long => pool.install(refit_all),
         _ => refit_all(),
     };
     let mut errors = vec![f64::NAN; sig.fixes.len()];

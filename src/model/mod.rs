@@ -650,6 +650,20 @@ impl Model {
         ChainSystem::new(self.reweighted(lin, theta), self.n_params())
     }
 
+    /// [`Model::chain_system`] of this model, which observes the fixes of
+    /// `base`'s model where `kept` is true, from `base`'s linearisation at
+    /// the same `theta` (see [`Model::restricted_to`]). `None` when the
+    /// observations do not match.
+    pub fn chain_system_within(
+        &self,
+        base: &ChainSystem,
+        theta: &[f64],
+        kept: &[bool],
+    ) -> Option<ChainSystem> {
+        let lin = self.restricted_to(base.linearisation(), theta, kept)?;
+        ChainSystem::new(lin, self.n_params())
+    }
+
     /// Whether barometric rows are observed (the model fits the barometer's offset).
     pub fn observes_baro(&self) -> bool {
         self.baro.is_some()

@@ -308,6 +308,44 @@ impl Model {
         out
     }
 
+    /// `lin` (made by a model on the same ride, effects and segments at the
+    /// same `theta`) restricted to the observations where `kept` is true,
+    /// which must be this model's, under this model's noise. The path's
+    /// derivatives at an observation do not depend on which others are
+    /// observed, so a fold of a validation that withholds fixes starts from
+    /// the full ride's linearisation instead of a sweep of its own: the same
+    /// numbers, O(fixes) instead of O(rows). `None` if the counts disagree.
+    pub(crate) fn restricted_to(
+        &self,
+        lin: &ChainLinearisation,
+        theta: &[f64],
+        kept: &[bool],
+    ) -> Option<ChainLinearisation> {
+        let take: Vec<usize> = (0..kept.len()).filter(|&o| kept[o]).collect();
+        if kept.len() != lin.x.len() || take.len() != self.observations.len() {
+            return None;
+        }
+        let sub = ChainLinearisation {
+            columns: lin.columns.clone(),
+            globals: lin.globals.clone(),
+            blocks: lin.blocks.clone(),
+            y: lin.y.clone(),
+            h: take.iter().map(|&o| lin.h[o]).collect(),
+            at: take.iter().map(|&o| lin.at[o]).collect(),
+            x: take.iter().map(|&o| lin.x[o]).collect(),
+            rows: take.iter().map(|&o| lin.rows[o]).collect(),
+            jg: lin.jg.select_rows(take.iter()),
+            jb: take.iter().map(|&o| lin.jb[o]).collect(),
+            r: DVector::from_iterator(take.len(), take.iter().map(|&o| lin.r[o])),
+            slope: take.iter().map(|&o| lin.slope[o]).collect(),
+            links: take.iter().map(|&o| lin.links[o]).collect(),
+            prior: lin.prior.clone(),
+            cost: lin.cost,
+            horizon: lin.horizon,
+        };
+        Some(self.reweighted(&sub, theta))
+    }
+
     /// The moment form, for rows that each see one observation (no GPS error correlation).
     fn structured_normal_equations(&self, theta: &[f64], free: &[bool]) -> Option<NormalEquations> {
         let c = self.chain_linearisation(theta, free)?;

@@ -437,3 +437,40 @@ fn a_window_frees_the_globals_and_its_own_segments() {
     }
     assert!(free.iter().filter(|&&f| f).count() < all.iter().filter(|&&f| f).count());
 }
+
+/// A fold of a validation (fixes withheld in the middle of the ride) starts
+/// from the full ride's linearisation with its own fixes picked out: the
+/// same system, number for number, as the fold's own sweep gives, under
+/// independent and correlated GPS errors and the whole catalogue (robust
+/// loss, lag-interpolated fixes); a mask that is not the fold's is refused.
+#[test]
+fn a_fold_picked_from_the_full_linearisation_is_the_folds_own() {
+    let mut checked = 0;
+    for m in models() {
+        let p = perturbed(&m);
+        let free = m.free_mask(&[
+            crate::effects::Role::Global,
+            crate::effects::Role::Segments,
+            crate::effects::Role::Step2Only,
+        ]);
+        let Some(base) = m.chain_system(&p, &free) else {
+            continue;
+        };
+        let t0 = m.signals.t[0];
+        let keep = |t: f64| !(t0 + 20.0..t0 + 32.0).contains(&t);
+        let fold = m.withholding(keep).unwrap();
+        assert!(fold.observations.len() < m.observations.len());
+        let kept: Vec<bool> = m.observations.iter().map(|o| keep(o.t)).collect();
+        let own = fold.chain_system(&p, &free).unwrap();
+        let picked = fold.chain_system_within(&base, &p, &kept).unwrap();
+        assert_eq!(own.cost(), picked.cost());
+        assert_eq!(own.columns(), picked.columns());
+        let (a, b) = (own.solve(1e-3).unwrap(), picked.solve(1e-3).unwrap());
+        assert_eq!(a, b);
+        // The full ride's own mask is not this fold's.
+        let all = vec![true; m.observations.len()];
+        assert!(fold.chain_system_within(&base, &p, &all).is_none());
+        checked += 1;
+    }
+    assert!(checked >= 5, "{checked} models in chain form");
+}

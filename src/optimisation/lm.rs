@@ -103,7 +103,23 @@ pub fn iterate(
     state: &mut LmState,
     tolerance: f64,
 ) -> StepOutcome {
-    let system = LinearSystem::of(model, theta, free);
+    iterate_from(None, model, theta, free, state, tolerance)
+}
+
+/// [`iterate`], linearised as `start` (the model's chain system at `theta`
+/// over `free`, made elsewhere) when given.
+pub(crate) fn iterate_from(
+    start: Option<ChainSystem>,
+    model: &Model,
+    theta: &mut [f64],
+    free: &[bool],
+    state: &mut LmState,
+    tolerance: f64,
+) -> StepOutcome {
+    let system = match start {
+        Some(c) => LinearSystem::Chain(Box::new(c)),
+        None => LinearSystem::of(model, theta, free),
+    };
     let cost = system.cost();
     let mut evaluations = 0;
     let mut trial = theta.to_vec();

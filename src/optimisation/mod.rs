@@ -212,6 +212,9 @@ pub struct Reconstruction {
     settings: FitSettings,
     phase: Phase,
     lm: LmState,
+    /// The first LM iteration's linear system, where a caller already has it
+    /// (see [`Reconstruction::resume_from`]).
+    start_system: Option<crate::model::ChainSystem>,
     gd: GdState,
     iteration: usize,
     phase_iterations: [usize; 2],
@@ -317,6 +320,21 @@ impl Reconstruction {
         Ok(fit)
     }
 
+    /// [`Reconstruction::resume`] whose first iteration is linearised as
+    /// `start`, the model's chain system at `theta` over step 2's free
+    /// parameters made by the caller (a validation's folds share the full
+    /// ride's linearisation, see `Model::chain_system_within`).
+    pub fn resume_from(
+        model: Model,
+        theta: Vec<f64>,
+        settings: FitSettings,
+        start: crate::model::ChainSystem,
+    ) -> Result<Self, FitError> {
+        let mut fit = Self::resume(model, theta, settings)?;
+        fit.start_system = Some(start);
+        Ok(fit)
+    }
+
     /// A fit of `model` at `theta`, in step 1 with no window yet.
     fn at(
         model: Model,
@@ -328,6 +346,7 @@ impl Reconstruction {
         check_observability(&model)?;
         Ok(Self {
             lm: LmState::new(settings.damping),
+            start_system: None,
             gd: GdState::new(settings.step_size),
             model,
             theta,
@@ -602,7 +621,13 @@ impl Reconstruction {
                 (Some(_), Phase::Step1) => tol.max(WINDOW_TOLERANCE),
                 _ => tol,
             };
-            lm::iterate(model, &mut self.theta, &free, &mut self.lm, tol)
+            // A system given for the start serves only the iteration it was
+            // made for: the same parameters free, at the same point.
+            let start = self
+                .start_system
+                .take()
+                .filter(|c| phase == Phase::Step2 && free_columns(&free) == c.columns());
+            lm::iterate_from(start, model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
             let c = self.model.cost(&self.theta);
             StepOutcome {
@@ -925,6 +950,11 @@ impl Reconstruction {
 
 /// Refuse models with more parameters than residual rows: the fit would be
 /// fitting noise (or singular) and the path would look plausible but be wrong.
+/// The indices where `free` is true: the columns of a linear system over them.
+fn free_columns(free: &[bool]) -> Vec<usize> {
+    (0..free.len()).filter(|&i| free[i]).collect()
+}
+
 fn check_observability(model: &Model) -> Result<(), FitError> {
     let rows = model.observations.len();
     let params = model.n_params();
