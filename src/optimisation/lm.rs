@@ -95,20 +95,10 @@ impl LinearSystem {
     }
 }
 
-/// One LM iteration on the parameters where `free` is true.
+/// One LM iteration on the parameters where `free` is true, linearised as
+/// `start` where the caller has it (the model's chain system at `theta`
+/// over `free`), else here.
 pub fn iterate(
-    model: &Model,
-    theta: &mut [f64],
-    free: &[bool],
-    state: &mut LmState,
-    tolerance: f64,
-) -> StepOutcome {
-    iterate_from(None, model, theta, free, state, tolerance)
-}
-
-/// [`iterate`], linearised as `start` (the model's chain system at `theta`
-/// over `free`, made elsewhere) when given.
-pub(crate) fn iterate_from(
     start: Option<ChainSystem>,
     model: &Model,
     theta: &mut [f64],

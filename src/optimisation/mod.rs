@@ -627,7 +627,7 @@ impl Reconstruction {
                 .start_system
                 .take()
                 .filter(|c| phase == Phase::Step2 && free_columns(&free) == c.columns());
-            lm::iterate_from(start, model, &mut self.theta, &free, &mut self.lm, tol)
+            lm::iterate(start, model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
             let c = self.model.cost(&self.theta);
             StepOutcome {
