@@ -85,12 +85,12 @@ pub(super) struct Work {
     /// Rows waiting to be folded in.
     pub(super) pending: Vec<Vec<f64>>,
     pub(super) origin: Vector3<f64>,
-    /// Buffers [`Work::pass_wander`] reuses from fix to fix: a fix's rows
-    /// were a tenth of the solver's time in allocations alone.
+    /// Buffers reused from fix to fix: allocating a fix's rows, arrays and
+    /// vectors afresh was about a quarter of a noise likelihood's time.
     pub(super) scratch: Scratch,
 }
 
-/// Reused buffers of the forward pass (see [`Work::pass_wander`]).
+/// Reused buffers of the forward pass ([`Work::pass_wander`], [`Work::compress`]).
 #[derive(Default)]
 pub(super) struct Scratch {
     /// The small array a wander is passed on in, column-major.
