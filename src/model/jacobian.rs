@@ -207,7 +207,7 @@ impl Model {
     /// Linearise the residuals at `theta` in the parameters where `free` is true.
     pub fn linearise(&self, theta: &[f64], free: &[bool]) -> Linearisation {
         let np = self.n_params();
-        let columns: Vec<usize> = (0..np).filter(|&i| free[i]).collect();
+        let columns = super::free_columns(&free[..np]);
         let mut col_of = vec![usize::MAX; np];
         for (c, &i) in columns.iter().enumerate() {
             col_of[i] = c;

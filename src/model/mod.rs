@@ -47,6 +47,12 @@ use nalgebra::{UnitQuaternion, Vector3};
 use crate::effects::{self, Effect, ParamInfo, PriorRows, Role};
 use crate::signals::Signals;
 
+/// The indices where `free` is true: the columns of a linear system over
+/// the free parameters, in parameter order.
+pub(crate) fn free_columns(free: &[bool]) -> Vec<usize> {
+    (0..free.len()).filter(|&i| free[i]).collect()
+}
+
 /// How far past the last fix of a window its model sweeps (s): beyond any GPS lag.
 const HORIZON_MARGIN_S: f64 = 5.0;
 

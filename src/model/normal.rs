@@ -119,7 +119,7 @@ impl Model {
     ) -> Option<ChainLinearisation> {
         let sig = &self.signals;
         let np = self.n_params();
-        let columns: Vec<usize> = (0..np).filter(|&i| free[i]).collect();
+        let columns = super::free_columns(&free[..np]);
         // Classify the free parameters.
         let mut globals: Vec<usize> = Vec::new();
         let mut blocks: Vec<Block> = Vec::new();

@@ -623,10 +623,9 @@ impl Reconstruction {
             };
             // A system given for the start serves only the iteration it was
             // made for: the same parameters free, at the same point.
-            let start = self
-                .start_system
-                .take()
-                .filter(|c| phase == Phase::Step2 && free_columns(&free) == c.columns());
+            let start = self.start_system.take().filter(|c| {
+                phase == Phase::Step2 && crate::model::free_columns(&free) == c.columns()
+            });
             lm::iterate(start, model, &mut self.theta, &free, &mut self.lm, tol)
         } else {
             let c = self.model.cost(&self.theta);
@@ -950,11 +949,6 @@ impl Reconstruction {
 
 /// Refuse models with more parameters than residual rows: the fit would be
 /// fitting noise (or singular) and the path would look plausible but be wrong.
-/// The indices where `free` is true: the columns of a linear system over them.
-fn free_columns(free: &[bool]) -> Vec<usize> {
-    (0..free.len()).filter(|&i| free[i]).collect()
-}
-
 fn check_observability(model: &Model) -> Result<(), FitError> {
     let rows = model.observations.len();
     let params = model.n_params();
