@@ -126,30 +126,28 @@ fn fit_one(
         true,
         against.as_ref(),
     );
-    // The JSON report holds the segment lengths' likelihoods.
-    let report = match out_dir {
-        Some(_) => report.with_segment_preference(&fit),
-        None => report,
+    let Some(dir) = out_dir else {
+        return Ok(report);
     };
-    if let Some(dir) = out_dir {
-        write_path(
-            &dir.join(format!("{stem}-path.csv")),
-            PathFormat::Csv,
-            ride,
-            &fit,
-            uncertainty.as_ref(),
-        )?;
-        write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
-        write_fit_html(
-            &dir.join(format!("{stem}-report.html")),
-            ride,
-            &fit,
-            &origin,
-            against.as_ref(),
-            uncertainty.as_ref(),
-            &report,
-        )?;
-    }
+    // The JSON report holds the segment lengths' likelihoods.
+    let report = report.with_segment_preference(&fit);
+    write_path(
+        &dir.join(format!("{stem}-path.csv")),
+        PathFormat::Csv,
+        ride,
+        &fit,
+        uncertainty.as_ref(),
+    )?;
+    write_report(&dir.join(format!("{stem}-report.json")), ride, &report)?;
+    write_fit_html(
+        &dir.join(format!("{stem}-report.html")),
+        ride,
+        &fit,
+        &origin,
+        against.as_ref(),
+        uncertainty.as_ref(),
+        &report,
+    )?;
     Ok(report)
 }
 

@@ -290,22 +290,27 @@ impl Model {
     /// slopes and links and the prior rows are this model's. O(fixes), not
     /// O(rows): what a search over noise settings needs.
     pub(crate) fn reweighted(&self, lin: &ChainLinearisation, theta: &[f64]) -> ChainLinearisation {
+        let mut out = lin.clone();
+        self.reweigh(&mut out, theta);
+        out
+    }
+
+    /// [`Model::reweighted`] in place.
+    fn reweigh(&self, lin: &mut ChainLinearisation, theta: &[f64]) {
         let plan = self.obs_plan(theta);
         let mut white = Whitener::new(&plan, &self.observations);
-        let mut out = lin.clone();
         for (k, &x) in lin.x.iter().enumerate() {
             let v = white.value(k, x);
-            out.r[k] = v.r;
-            out.slope[k] = (v.slope, v.back);
+            lin.r[k] = v.r;
+            lin.slope[k] = (v.slope, v.back);
         }
-        out.links = plan.links;
+        lin.links = plan.links;
         let mut prior = self.prior_rows(theta);
         let prior_cost = prior.residuals.iter().map(|x| x * x).sum::<f64>();
         let free: std::collections::HashSet<usize> = lin.columns.iter().copied().collect();
         prior.entries.retain(|(_, col, _)| free.contains(col));
-        out.cost = out.r.norm_squared() + prior_cost;
-        out.prior = prior;
-        out
+        lin.cost = lin.r.norm_squared() + prior_cost;
+        lin.prior = prior;
     }
 
     /// `lin` (made by a model on the same ride, effects and segments at the
@@ -325,7 +330,9 @@ impl Model {
         if kept.len() != lin.x.len() || take.len() != self.observations.len() {
             return None;
         }
-        let sub = ChainLinearisation {
+        // The residuals, slopes, links, prior rows and cost are this model's:
+        // `reweigh` writes them over the picked ones.
+        let mut sub = ChainLinearisation {
             columns: lin.columns.clone(),
             globals: lin.globals.clone(),
             blocks: lin.blocks.clone(),
@@ -343,7 +350,8 @@ impl Model {
             cost: lin.cost,
             horizon: lin.horizon,
         };
-        Some(self.reweighted(&sub, theta))
+        self.reweigh(&mut sub, theta);
+        Some(sub)
     }
 
     /// The moment form, for rows that each see one observation (no GPS error correlation).

@@ -171,7 +171,7 @@ impl Work {
             spare.push(row);
         }
         triangularise_in(stack, nr, n, tri, reflector);
-        self.rows = DMatrix::from_fn(n, n + 1, |i, k| stack[k * nr + i]);
+        self.rows = block_of(stack, nr, (0, 0), (n, n + 1));
     }
 
     /// A zero row of `len` entries, in a buffer folded in earlier where there is one.
@@ -323,7 +323,7 @@ impl Work {
         let prev = std::mem::replace(&mut self.wander[c], o);
         Op::Eliminate {
             what: Unknown::Wander(prev),
-            rows: DMatrix::from_fn(1, nc, |_, k| array[k * nl]),
+            rows: block_of(array, nl, (0, 0), (1, nc)),
             rest: self.front(),
         }
     }
@@ -419,10 +419,18 @@ pub(super) fn triangularise_in(
 /// (nalgebra's `view(..).into_owned()` copies element by element through an
 /// iterator, which was a sixth of the chain solver's time).
 pub(super) fn block(a: &DMatrix<f64>, start: (usize, usize), size: (usize, usize)) -> DMatrix<f64> {
+    block_of(a.as_slice(), a.nrows(), start, size)
+}
+
+/// [`block`] of the column-major array `src` of `stride` rows.
+pub(super) fn block_of(
+    src: &[f64],
+    stride: usize,
+    start: (usize, usize),
+    size: (usize, usize),
+) -> DMatrix<f64> {
     let (r0, c0) = start;
     let (nr, nc) = size;
-    let stride = a.nrows();
-    let src = a.as_slice();
     let mut out = Vec::with_capacity(nr * nc);
     for j in c0..c0 + nc {
         out.extend_from_slice(&src[j * stride + r0..j * stride + r0 + nr]);
