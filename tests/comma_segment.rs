@@ -141,6 +141,59 @@ fn global_pose_is_the_reference_truth_csv_was_made_from() {
     assert!(e.contains("no t0_boot_s"), "{e}");
 }
 
+/// The ride's clock does not depend on which distance is read: with the
+/// u-blox speed the rows start 77 ms later (its first sample), but `t_s`
+/// still counts from the CAN speed's first gyro sample, so the converted
+/// ride's `truth.csv` (on that clock) and `global_pose` (on the boot clock)
+/// measure the same path alike. Counted from the first row, `truth.csv`
+/// read 0.63 m where the path is 1.64 m from comma's pose.
+#[test]
+fn the_clock_is_the_same_whichever_distance_is_read() {
+    let open = |distance| {
+        gyropath::pipeline::open(
+            &segment(),
+            &ImportOptions {
+                distance,
+                ..ImportOptions::default()
+            },
+        )
+        .expect("open")
+        .log
+    };
+    let (can, gnss) = (open(DistanceChoice::Auto), open(DistanceChoice::Gnss));
+    assert_eq!(can.metadata["t0_boot_s"], gnss.metadata["t0_boot_s"]);
+    // The UTC tie comes from the first fix's arrival, which jitters by
+    // tens of milliseconds from sample to sample.
+    let unix = |log: &gyropath::ride::RideLog| -> f64 {
+        log.metadata["t0_unix_s"].parse().expect("t0_unix_s")
+    };
+    assert!((unix(&can) - unix(&gnss)).abs() < 0.02);
+    assert_eq!(can.t_s[0], 0.0);
+    assert!((0.05..0.1).contains(&gnss.t_s[0]), "{}", gnss.t_s[0]);
+    let signals = gyropath::pipeline::signals(
+        gyropath::pipeline::open(
+            &segment(),
+            &ImportOptions {
+                distance: DistanceChoice::Gnss,
+                ..ImportOptions::default()
+            },
+        )
+        .expect("open"),
+    )
+    .expect("signals");
+    let mut fit = Reconstruction::new(signals.clone(), FitSettings::default()).expect("fit");
+    fit.finish();
+    let rms = |reference: &Path| {
+        let (track, matched) = gyropath::pipeline::reference_for(reference, &signals).expect("ref");
+        compare(fit.model(), fit.params(), &track, &matched)
+            .horizontal
+            .rms_m
+    };
+    let truth = converted().with_file_name("truth.csv");
+    let (a, b) = (rms(&truth), rms(&segment().join("global_pose")));
+    assert!((a - b).abs() < 0.01, "truth.csv {a} m, global_pose {b} m");
+}
+
 /// Without the CAN speed: the distance from the u-blox speed. The receiver's
 /// fixes and speed arrive about 0.1 s late (the lag the CAN fit's `gps_lag`
 /// measures, 0.096 s); on this straight minute nothing but the reference can

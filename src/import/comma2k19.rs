@@ -7,8 +7,9 @@
 //! - **Rows**: the samples of `IMU/gyro_uncalibrated` (about 104 Hz; the
 //!   uncalibrated rates keep the gyro's real bias, which gyropath fits), in
 //!   the time the distance covers (the CAN speed's, or without it the
-//!   u-blox's). `t_s` counts from the first row, whose boot time is the
-//!   `t0_boot_s` metadata.
+//!   u-blox's). `t_s` counts from the first of them in the CAN speed's time
+//!   (the u-blox's without CAN), whichever distance is used; its boot time
+//!   is the `t0_boot_s` metadata.
 //! - **Gyro**: comma's axes are forward, right, down (rad/s); the ride log's
 //!   are forward, left, up (deg/s): `gx = fwd`, `gy = -right`, `gz = -down`.
 //! - **Distance**: `CAN/speed` (m/s, about 83 Hz) integrated by trapezoids at
@@ -111,18 +112,22 @@ pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
     let name = segment.display().to_string();
     let gyro = required(segment, "IMU/gyro_uncalibrated", 3)?;
     let gnss = required(segment, "GNSS/live_gnss_ublox", 6)?;
-    let can = if with_odometer {
-        signal(segment, "CAN/speed")?
-    } else {
-        None
-    };
+    let can_speed = signal(segment, "CAN/speed")?;
+    let span_of = |t: &[f64]| (t[0], t[t.len() - 1]);
+    let within = |(a, b): (f64, f64), x: f64| x >= a && x <= b;
+    // The ride's clock: `t_s = 0` at the segment's first gyro sample in the
+    // CAN speed's time (the u-blox's without one), whichever distance is
+    // used, so that a reference on the ride's clock (the converted ride's
+    // `truth.csv`) lines up with `--distance gnss` too. Counted from the
+    // first row instead, it moved by the 77 ms the u-blox starts later and
+    // such a reference read 0.63 m where the path is 1.64 m off.
+    let clock = span_of(can_speed.as_ref().map_or(&gnss.t, |c| &c.t));
+    let origin = gyro.t.iter().copied().find(|&x| within(clock, x));
+    let can = can_speed.filter(|_| with_odometer);
     // The rows: the gyro's samples within the distance's time.
-    let span = match &can {
-        Some(c) => (c.t[0], c.t[c.t.len() - 1]),
-        None => (gnss.t[0], gnss.t[gnss.t.len() - 1]),
-    };
+    let span = span_of(can.as_ref().map_or(&gnss.t, |c| &c.t));
     let rows: Vec<usize> = (0..gyro.t.len())
-        .filter(|&k| gyro.t[k] >= span.0 && gyro.t[k] <= span.1)
+        .filter(|&k| within(span, gyro.t[k]))
         .collect();
     if rows.len() < 2 {
         return Err(LoadError::File {
@@ -131,7 +136,7 @@ pub fn read(segment: &Path, with_odometer: bool) -> Result<RideLog, LoadError> {
         });
     }
     let t_boot: Vec<f64> = rows.iter().map(|&k| gyro.t[k]).collect();
-    let t0 = t_boot[0];
+    let t0 = origin.unwrap_or(t_boot[0]);
     let n = rows.len();
     let mut log = RideLog {
         source: name.clone(),
