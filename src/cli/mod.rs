@@ -221,12 +221,16 @@ pub struct SettingsArgs {
     /// over TAU s) or `SIGMA,TAU,JITTER` (plus a jitter of JITTER m per fix).
     #[arg(long, alias = "gps-sigma", default_value = "auto")]
     pub gps_noise: String,
-    /// With `--gps-noise auto`: `auto` lets the ride choose heavy-tailed
-    /// (Student-t) GPS errors where its innovations ask for them, each fix
-    /// weighted by how unlikely it is (a city's reflections: Berlin 9.34 ->
-    /// 7.85 m from its reference; some simulated urban rides end further
-    /// from their truth, see docs/real-drives.md); `off` keeps the Gaussian law.
-    #[arg(long, value_enum, default_value_t = TailsArg::Off)]
+    /// With `--gps-noise auto`: `gain` (the default) keeps the Gaussian law
+    /// but checks the odometer gain against a heavy-tailed (Student-t) fit
+    /// where the ride's innovations ask for one, and holds the robust gain
+    /// where least squares lies more than 2 sigma from it (a city's
+    /// reflections lengthen the track: Berlin 9.34 -> 6.36 m from its
+    /// reference); `auto` keeps the heavy-tailed fit whole, each fix weighted
+    /// by how unlikely it is (Berlin 7.85 m; some simulated urban rides end
+    /// further from their truth); `off`: the Gaussian law alone. See
+    /// docs/real-drives.md.
+    #[arg(long, value_enum, default_value_t = TailsArg::Gain)]
     pub gps_tails: TailsArg,
     /// Increment map: exact exponential or the paper's small-angle quaternion.
     #[arg(long, value_enum, default_value_t = IncrementArg::Exact)]
@@ -236,6 +240,7 @@ pub struct SettingsArgs {
 /// Whether the GPS error's heavy tails are learnt from the ride.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum TailsArg {
+    Gain,
     Auto,
     Off,
 }
@@ -287,6 +292,7 @@ impl SettingsArgs {
                 gps: self.gps_noise.trim() == "auto",
                 walk: self.bias_walk.trim() == "auto",
                 tails: self.gps_tails == TailsArg::Auto,
+                robust_gain: self.gps_tails == TailsArg::Gain,
             },
             model: ModelSpec {
                 // The paper's model, then what the user listed (once each:

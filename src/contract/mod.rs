@@ -10,7 +10,7 @@
 mod spec;
 mod start;
 
-pub use spec::{DEFAULT_BIAS_WALK, GpsTails, ModelError, ModelSpec};
+pub use spec::{DEFAULT_BIAS_WALK, GpsTails, HeldParam, ModelError, ModelSpec};
 pub use start::{StartError, StartGuess};
 
 use nalgebra::{Matrix3, Vector3};

@@ -65,6 +65,22 @@ pub struct ModelSpec {
     /// per-fix scales belong to one ride, and the next ride's fit learns its own.
     #[serde(skip)]
     pub gps_tails: Option<GpsTails>,
+    /// Parameters held at values found apart from this fit's own least
+    /// squares (the odometer gain of the heavy-tailed fit, where the
+    /// Gaussian's is off by more than its sigma allows; see
+    /// `optimisation::calibration`). Not saved with the settings: like the
+    /// tails, a held value belongs to one ride's fixes.
+    #[serde(skip)]
+    pub held: Vec<HeldParam>,
+}
+
+/// A parameter held at `value` (internal units), named as the report names
+/// it: its effect's id and the parameter's name (`odometer_gain`, `gain`).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HeldParam {
+    pub effect: String,
+    pub name: String,
+    pub value: f64,
 }
 
 /// A Student-t GPS error: each fix's error (its jitter and the wander's step
@@ -106,6 +122,7 @@ impl Default for ModelSpec {
             gps_tau_vertical_s: None,
             increment: Increment::Exact,
             gps_tails: None,
+            held: Vec::new(),
         }
     }
 }

@@ -31,7 +31,7 @@ mod sweep;
 mod uncertainty;
 
 pub use crate::contract::{
-    DEFAULT_BIAS_WALK, GpsTails, ModelError, ModelSpec, StartError, StartGuess,
+    DEFAULT_BIAS_WALK, GpsTails, HeldParam, ModelError, ModelSpec, StartError, StartGuess,
 };
 pub use chain::{ChainSystem, Marginals};
 pub use jacobian::Linearisation;
@@ -356,10 +356,41 @@ impl Model {
 
     /// Starting parameter vector.
     pub fn initial_params(&self) -> Vec<f64> {
-        self.effects
+        let mut theta: Vec<f64> = self
+            .effects
             .iter()
             .flat_map(|e| e.initial(&self.start))
+            .collect();
+        self.set_held(&mut theta);
+        theta
+    }
+
+    /// Index and value of every parameter the spec holds (see
+    /// [`crate::contract::HeldParam`]); one the model lacks is ignored.
+    fn held(&self) -> Vec<(usize, f64)> {
+        if self.spec.held.is_empty() {
+            return Vec::new();
+        }
+        let infos = self.param_infos();
+        self.spec
+            .held
+            .iter()
+            .filter_map(|h| {
+                infos
+                    .iter()
+                    .position(|(id, p)| *id == h.effect && p.name == h.name)
+                    .map(|i| (i, h.value))
+            })
             .collect()
+    }
+
+    /// `theta` with the held parameters at their values.
+    fn set_held(&self, theta: &mut [f64]) {
+        for (i, v) in self.held() {
+            if let Some(x) = theta.get_mut(i) {
+                *x = v;
+            }
+        }
     }
 
     /// Parameter descriptions, in parameter-vector order, with their effect id.
@@ -375,10 +406,15 @@ impl Model {
 
     /// Parameters held at their starting values (see [`Effect::fixed`]).
     pub fn fixed_mask(&self) -> Vec<bool> {
-        self.effects
+        let mut mask: Vec<bool> = self
+            .effects
             .iter()
             .flat_map(|e| (0..e.n_params()).map(|i| e.fixed(i)))
-            .collect()
+            .collect();
+        for (i, _) in self.held() {
+            mask[i] = true;
+        }
+        mask
     }
 
     /// Which parameters each optimisation step frees.
@@ -390,6 +426,9 @@ impl Model {
                     *m = !effect.fixed(i);
                 }
             }
+        }
+        for (i, _) in self.held() {
+            mask[i] = false;
         }
         mask
     }
@@ -604,6 +643,7 @@ impl Model {
                 p[r].copy_from_slice(&mapped);
             }
         }
+        self.set_held(&mut p);
         p
     }
 

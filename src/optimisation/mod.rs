@@ -244,6 +244,11 @@ pub struct Reconstruction {
     tail_rounds: usize,
     /// The tails are settled (or not wanted).
     tails_done: bool,
+    /// While the tails only check the gain (`AutoNoise::robust_gain`): the
+    /// Gaussian fit's parameters, to go back to once they have spoken.
+    gaussian_theta: Option<Vec<f64>>,
+    /// What that check found (see [`noise::calibration`]).
+    calibration: Vec<noise::calibration::CalibrationCheck>,
 }
 
 /// Rounds of tail weights at most. Each costs a step 2; under the Gaussian
@@ -366,6 +371,8 @@ impl Reconstruction {
             tail_summary: None,
             tail_rounds: 0,
             tails_done: false,
+            gaussian_theta: None,
+            calibration: Vec::new(),
         })
     }
 
@@ -703,9 +710,11 @@ impl Reconstruction {
     /// under the Gaussian law, as a fresh fit's is), if asked for.
     fn reset_tails(&mut self, auto: AutoNoise) {
         self.tail_rounds = 0;
-        self.tails_done = !(auto.gps && auto.tails);
+        self.tails_done = !auto.learns_tails();
         self.tails = None;
         self.tail_summary = None;
+        self.gaussian_theta = None;
+        self.calibration.clear();
     }
 
     /// Whether the noise search is still to run: asked for, not yet run on
@@ -726,8 +735,7 @@ impl Reconstruction {
     /// error law the fit learns; `diagnose` ranks under the law as set),
     /// and no robust loss (which answers the same tails; see `Model`).
     fn wants_tails(&self) -> bool {
-        self.settings.auto_noise.gps
-            && self.settings.auto_noise.tails
+        self.settings.auto_noise.learns_tails()
             && self.noise_done
             && !self.tails_done
             && self.model.robust_scale().is_none()
@@ -736,21 +744,24 @@ impl Reconstruction {
     }
 
     /// The spec the fit runs: `spec` with the estimated noise in place of
-    /// the settings `auto` covers, and the tails learnt.
+    /// the settings `auto` covers, the tails learnt (while they only check
+    /// the gain, until they have) and what that check holds.
     fn effective_spec(&self, spec: &ModelSpec, auto: AutoNoise) -> ModelSpec {
         let mut spec = match &self.noise {
             Some(n) => n.apply(spec, auto),
             None => spec.clone(),
         };
-        if auto.gps && auto.tails {
+        if auto.learns_tails() {
             spec.gps_tails = self.tails.clone();
+            spec.held = self.calibration.iter().filter_map(|c| c.hold()).collect();
         }
         spec
     }
 
-    /// The noise settings estimated, with the tails' summary.
+    /// The noise settings estimated, with the tails' summary and the gain's check.
     fn noise_found(&self, mut n: NoiseEstimate) -> NoiseEstimate {
         n.gps_tails = self.tail_summary.clone();
+        n.calibration = self.calibration.clone();
         n
     }
 
@@ -807,9 +818,15 @@ impl Reconstruction {
         });
         let Some((fit, tails)) = next else {
             self.tails_done = true;
+            if !self.settings.auto_noise.tails {
+                return self.check_calibration(outcome);
+            }
             self.phase = Phase::Done;
             return self.report(Phase::Noise, outcome, true);
         };
+        if !self.settings.auto_noise.tails && self.gaussian_theta.is_none() {
+            self.gaussian_theta = Some(self.theta.clone());
+        }
         self.tail_rounds += 1;
         self.tails = Some(tails);
         let summary = noise::tails::TailSummary {
@@ -830,6 +847,52 @@ impl Reconstruction {
         self.phase = Phase::Step2;
         self.phase_iterations[1] = 0;
         self.report(Phase::Noise, outcome, true)
+    }
+
+    /// The end of the gain's check (see [`noise::calibration`]): the
+    /// heavy-tailed fit's gain against the Gaussian fit's. Back to the
+    /// Gaussian fit as it was; where the gain moved beyond the rule, held at
+    /// the heavy-tailed value for one more step 2 under the Gaussian law.
+    /// A ride whose innovations did not ask for heavy tails never left the
+    /// Gaussian fit.
+    fn check_calibration(&mut self, mut outcome: StepOutcome) -> IterationReport {
+        let gaussian_theta = self
+            .gaussian_theta
+            .take()
+            .filter(|t| t.len() == self.model.n_params());
+        let Some(gaussian_theta) = gaussian_theta else {
+            self.phase = Phase::Done;
+            return self.report(Phase::Noise, outcome, true);
+        };
+        self.tails = None;
+        self.tail_summary = None;
+        let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
+        let gaussian =
+            match Model::with_start(self.model.signals.clone(), spec, self.model.start.clone()) {
+                Ok(m) => m,
+                Err(_) => {
+                    self.phase = Phase::Done;
+                    return self.report(Phase::Noise, outcome, true);
+                }
+            };
+        let robust = std::mem::replace(&mut self.model, gaussian);
+        let robust_theta = std::mem::replace(&mut self.theta, gaussian_theta);
+        self.calibration =
+            noise::calibration::check(&self.model, &self.theta, &robust, &robust_theta);
+        if let Some(n) = self.noise.take() {
+            self.noise = Some(self.noise_found(n));
+        }
+        outcome.cost = self.model.cost(&self.theta);
+        outcome.accepted = true;
+        let held = self.calibration.iter().any(|c| c.held);
+        if held {
+            self.rebuild(&mut outcome);
+            self.phase = Phase::Step2;
+            self.phase_iterations[1] = 0;
+        } else {
+            self.phase = Phase::Done;
+        }
+        self.report(Phase::Noise, outcome, !held)
     }
 
     /// The model rebuilt under the settings now in force (the noise and

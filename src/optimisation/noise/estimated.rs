@@ -116,6 +116,11 @@ pub struct NoiseEstimate {
     /// The heavy tails learnt from the ride (`None`: Gaussian fixes).
     #[serde(default)]
     pub gps_tails: Option<super::tails::TailSummary>,
+    /// The odometer gain checked against the heavy-tailed fit (empty where
+    /// the ride's innovations did not ask for heavy tails, or the check was
+    /// not asked for).
+    #[serde(default)]
+    pub calibration: Vec<super::calibration::CalibrationCheck>,
 }
 
 impl NoiseEstimate {
@@ -207,8 +212,14 @@ impl NoiseEstimate {
             .gps_tails
             .as_ref()
             .map_or(String::new(), |t| format!(", {}", t.describe()));
+        let held: String = self
+            .calibration
+            .iter()
+            .filter(|c| c.held)
+            .map(|c| format!(", {}", c.describe()))
+            .collect();
         format!(
-            "GPS sigma {}, {}, {}{tails}{heights}, bias walk {}",
+            "GPS sigma {}, {}, {}{tails}{heights}, bias walk {}{held}",
             self.gps_sigma_m.describe("m", 2),
             self.tau_text(),
             self.jitter_text(),

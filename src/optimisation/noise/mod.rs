@@ -53,6 +53,7 @@ use rayon::prelude::*;
 
 use crate::model::{ChainSystem, Model, ModelSpec};
 
+pub mod calibration;
 mod estimated;
 pub mod heavy;
 mod search;
@@ -72,6 +73,15 @@ pub struct AutoNoise {
     /// innovations ask for them. Off (the default): a Gaussian law.
     #[serde(default)]
     pub tails: bool,
+    /// With `gps` and without `tails`: the odometer gain checked against the
+    /// heavy-tailed fit and held at its value where the Gaussian's lies
+    /// outside its own 95 % interval of it ([`calibration`]). On by default.
+    #[serde(default = "on")]
+    pub robust_gain: bool,
+}
+
+fn on() -> bool {
+    true
 }
 
 /// The GPS noise is estimated by default, the bias walk is not: a
@@ -86,13 +96,15 @@ pub struct AutoNoise {
 /// innovations) also chooses them on simulated urban rides where they hurt
 /// (seeds 11 and 12: 2.67 and 1.62 m from the truth -> 3.01 and 2.15 m), past
 /// the 5 % that no simulated ride may lose. `--gps-tails auto` asks for
-/// them (docs/real-drives.md).
+/// them (docs/real-drives.md). What they are safe for, the odometer gain,
+/// is checked against them by default (`robust_gain`, [`calibration`]).
 impl Default for AutoNoise {
     fn default() -> Self {
         Self {
             gps: true,
             walk: false,
             tails: false,
+            robust_gain: true,
         }
     }
 }
@@ -102,7 +114,14 @@ impl AutoNoise {
         gps: false,
         walk: false,
         tails: false,
+        robust_gain: false,
     };
+
+    /// Whether the fit learns the tails after the noise search: for good
+    /// (`tails`), or to check the gain against them (`robust_gain`).
+    pub fn learns_tails(&self) -> bool {
+        self.gps && (self.tails || self.robust_gain)
+    }
 
     pub fn any(&self) -> bool {
         self.gps || self.walk
@@ -501,6 +520,7 @@ fn estimate_on(
         neg2_log_likelihood: value,
         evaluations,
         gps_tails: None,
+        calibration: Vec::new(),
     })
 }
 
