@@ -441,6 +441,11 @@ pub struct ParamValue {
     /// `false` when the sigma spans what the parameter can physically be:
     /// the ride does not determine it (see `ParamInfo::within`).
     pub determined: bool,
+    /// Fitted apart from the least squares and held there (the odometer
+    /// gain of the heavy-tailed fit, see `optimisation::noise::calibration`);
+    /// its sigma is that fit's.
+    #[serde(default)]
+    pub held: bool,
 }
 
 impl ParamValue {
@@ -449,12 +454,17 @@ impl ParamValue {
         if self.fixed {
             return "not fitted".to_string();
         }
-        crate::effects::plus_minus(
+        let value = crate::effects::plus_minus(
             self.value,
             self.sigma.map(|s| (s, self.determined)),
             &self.unit,
             5,
-        )
+        );
+        if self.held {
+            format!("{value} (held: the heavy-tailed fit's)")
+        } else {
+            value
+        }
     }
 }
 
@@ -607,6 +617,7 @@ impl FitReport {
         let fixed_mask = fixed.clone();
         // Read before the loop below takes the sigmas.
         let bias_sigmas = crate::diagnosis::segment_sigmas(model, &sigmas);
+        let checks = fit.noise().map_or(&[][..], |n| &n.calibration[..]);
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -614,14 +625,20 @@ impl FitReport {
             .zip(fixed)
             .zip(sigmas)
         {
+            // A held parameter was fitted, by the heavy-tailed fit: its sigma.
+            let held = checks
+                .iter()
+                .find(|c| c.held && c.effect == effect && c.name == info.name);
+            let sigma = held.map_or(sigma, |c| c.robust_sigma);
             let determined = sigma.is_none_or(|s| info.determined(s));
             parameters.entry(effect).or_default().push(ParamValue {
                 name: info.name,
                 value: value * info.scale,
                 unit: info.unit.to_string(),
-                fixed,
+                fixed: fixed && held.is_none(),
                 sigma: sigma.map(|s| s * info.scale.abs()),
                 determined,
+                held: held.is_some(),
             });
         }
         let [s1, s2] = fit.phase_iterations();

@@ -191,12 +191,14 @@ fn real_drives_against_their_references() {
                 assert!(after.horizontal.rms_m < 0.6, "{name}: {after:?}");
                 assert_eq!(added.first().map(String::as_str), Some("gps_lag"));
             }
-            // Berlin: city fixes 20 m off. Guards of today's result (the
-            // issue's targets, 0.35 and 0.25 x the fixes, are not met yet:
-            // see docs/real-drives.md), and no odometer warning from a noisy GPS track.
+            // Berlin: city fixes 20 m off. The default target, 0.35 x
+            // the fixes (measured 6.28 m against 20.33 m: the odometer gain
+            // held at the heavy-tailed fit's); its workflow target, 0.25 x,
+            // is not met yet (docs/real-drives.md). No odometer warning from
+            // a noisy GPS track.
             "smartloc-berlin-potsdamer-platz" => {
                 assert!(
-                    default.horizontal.rms_m < 0.5 * fixes.rms_m,
+                    default.horizontal.rms_m < 0.35 * fixes.rms_m,
                     "{name}: {default:?}"
                 );
                 // A noisy city track is longer than the road; that is no
@@ -219,16 +221,27 @@ fn real_drives_against_their_references() {
     eprintln!("{}", table.join("\n"));
 }
 
+/// The Gaussian law alone (`--gps-tails off`): no gain checked.
+fn gaussian_alone() -> FitSettings {
+    FitSettings {
+        auto_noise: AutoNoise {
+            robust_gain: false,
+            ..AutoNoise::default()
+        },
+        ..FitSettings::default()
+    }
+}
+
 /// `--gps-tails auto` on the real drives: the Student-t wander is chosen by
 /// the innovations' likelihood on both and lowers the error to the
-/// reference (measured: Berlin 9.34 -> 7.85 m, comma 1.24 -> 0.93 m); the
-/// rule sees no reference. Printed beside the Gaussian default.
+/// reference against the Gaussian law alone (measured: Berlin 9.34 -> 7.85
+/// m, comma 1.24 -> 0.93 m); the rule sees no reference.
 #[test]
 fn heavy_tails_learnt_from_the_real_drives_bring_them_nearer_their_references() {
     for folder in drives() {
         let name = folder.file_name().unwrap().to_string_lossy().into_owned();
         let d = open(&folder);
-        let (_, gaussian) = fit(&d, FitSettings::default());
+        let (_, gaussian) = fit(&d, gaussian_alone());
         let heavy = FitSettings {
             auto_noise: AutoNoise {
                 tails: true,
@@ -291,4 +304,55 @@ fn tails_asked_for_after_the_fit_end_where_a_fresh_fit_does() {
         fresh_ref.horizontal.rms_m,
         later_ref.horizontal.rms_m
     );
+}
+
+/// The default checks the odometer gain against the heavy-tailed fit
+/// (`optimisation::noise::calibration`): on Berlin least squares reads
+/// 1.0385 +- 0.0139, 2.15 sigma from the heavy-tailed 1.0086 (the CAN speed
+/// fitted to the reference: 0.992), so the robust gain is held and the path
+/// ends 6.28 m from the reference instead of 9.34 m; on the comma drive the
+/// two agree (0.45 sigma) and the Gaussian fit stands to the digit.
+#[test]
+fn the_default_holds_the_heavy_tailed_gain_where_least_squares_strays() {
+    for folder in drives() {
+        let name = folder.file_name().unwrap().to_string_lossy().into_owned();
+        let d = open(&folder);
+        let (plain, plain_ref) = fit(&d, gaussian_alone());
+        let (checked, checked_ref) = fit(&d, FitSettings::default());
+        let checks = checked.noise().expect("noise").calibration.clone();
+        let [gain] = &checks[..] else {
+            panic!("{name}: {checks:?}");
+        };
+        eprintln!(
+            "{name}: Gaussian alone {:.2} m, default {:.2} m; gain {:.4} +- {:.4} against {:.4} ({:+.2} sigma), held {}",
+            plain_ref.horizontal.rms_m,
+            checked_ref.horizontal.rms_m,
+            gain.gaussian,
+            gain.gaussian_sigma,
+            gain.robust,
+            gain.shift(),
+            gain.held
+        );
+        match name.as_str() {
+            "smartloc-berlin-potsdamer-platz" => {
+                assert!(gain.held && gain.shift() < -2.0, "{gain:?}");
+                assert!((0.99..1.02).contains(&gain.robust), "{gain:?}");
+                assert!(
+                    checked_ref.horizontal.rms_m < 0.75 * plain_ref.horizontal.rms_m,
+                    "{name}: {} m against {} m",
+                    checked_ref.horizontal.rms_m,
+                    plain_ref.horizontal.rms_m
+                );
+                // The held gain is reported with the heavy-tailed fit's sigma.
+                let report = gyropath::export::FitReport::new(&checked, 0.0);
+                let g = &report.parameters["odometer_gain"][0];
+                assert!(g.held && !g.fixed && g.sigma.is_some(), "{g:?}");
+                assert!(g.describe().contains("held"), "{}", g.describe());
+            }
+            _ => {
+                assert!(!gain.held && gain.shift().abs() < 2.0, "{gain:?}");
+                assert_eq!(checked.params(), plain.params(), "{name}");
+            }
+        }
+    }
 }

@@ -225,7 +225,7 @@ pub struct SettingsArgs {
     /// but checks the odometer gain against a heavy-tailed (Student-t) fit
     /// where the ride's innovations ask for one, and holds the robust gain
     /// where least squares lies more than 2 sigma from it (a city's
-    /// reflections lengthen the track: Berlin 9.34 -> 6.36 m from its
+    /// reflections lengthen the track: Berlin 9.34 -> 6.28 m from its
     /// reference); `auto` keeps the heavy-tailed fit whole, each fix weighted
     /// by how unlikely it is (Berlin 7.85 m; some simulated urban rides end
     /// further from their truth); `off`: the Gaussian law alone. See

@@ -245,8 +245,9 @@ pub struct Reconstruction {
     /// The tails are settled (or not wanted).
     tails_done: bool,
     /// While the tails only check the gain (`AutoNoise::robust_gain`): the
-    /// Gaussian fit's parameters, to go back to once they have spoken.
-    gaussian_theta: Option<Vec<f64>>,
+    /// Gaussian fit's parameters and step-2 iterations, to go back to once
+    /// they have spoken.
+    gaussian_fit: Option<(Vec<f64>, usize)>,
     /// What that check found (see [`noise::calibration`]).
     calibration: Vec<noise::calibration::CalibrationCheck>,
 }
@@ -371,7 +372,7 @@ impl Reconstruction {
             tail_summary: None,
             tail_rounds: 0,
             tails_done: false,
-            gaussian_theta: None,
+            gaussian_fit: None,
             calibration: Vec::new(),
         })
     }
@@ -713,7 +714,7 @@ impl Reconstruction {
         self.tails_done = !auto.learns_tails();
         self.tails = None;
         self.tail_summary = None;
-        self.gaussian_theta = None;
+        self.gaussian_fit = None;
         self.calibration.clear();
     }
 
@@ -824,8 +825,8 @@ impl Reconstruction {
             self.phase = Phase::Done;
             return self.report(Phase::Noise, outcome, true);
         };
-        if !self.settings.auto_noise.tails && self.gaussian_theta.is_none() {
-            self.gaussian_theta = Some(self.theta.clone());
+        if !self.settings.auto_noise.tails && self.gaussian_fit.is_none() {
+            self.gaussian_fit = Some((self.theta.clone(), self.phase_iterations[1]));
         }
         self.tail_rounds += 1;
         self.tails = Some(tails);
@@ -856,11 +857,11 @@ impl Reconstruction {
     /// A ride whose innovations did not ask for heavy tails never left the
     /// Gaussian fit.
     fn check_calibration(&mut self, mut outcome: StepOutcome) -> IterationReport {
-        let gaussian_theta = self
-            .gaussian_theta
+        let gaussian = self
+            .gaussian_fit
             .take()
-            .filter(|t| t.len() == self.model.n_params());
-        let Some(gaussian_theta) = gaussian_theta else {
+            .filter(|(t, _)| t.len() == self.model.n_params());
+        let Some((gaussian_theta, step2_iterations)) = gaussian else {
             self.phase = Phase::Done;
             return self.report(Phase::Noise, outcome, true);
         };
@@ -891,6 +892,7 @@ impl Reconstruction {
             self.phase_iterations[1] = 0;
         } else {
             self.phase = Phase::Done;
+            self.phase_iterations[1] = step2_iterations;
         }
         self.report(Phase::Noise, outcome, !held)
     }
