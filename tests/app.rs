@@ -702,9 +702,10 @@ fn a_wheel_distance_from_a_fit_file_is_picked_in_the_source_panel_and_removed() 
     h.get_by_label("Wheel distance (FIT)...");
 }
 
-/// Ticking "heavy tails from the ride" after a fit and running again ends
-/// where a fit with the tails from the start does (Berlin: three rounds of
-/// weights, a Student-t law of about 1.8 degrees of freedom).
+/// On Berlin the default holds the heavy-tailed fit's odometer gain and the
+/// panels say so; ticking "heavy tails from the ride" after the fit and
+/// running again ends where a fit with the tails from the start does (three
+/// rounds of weights, a Student-t law of about 1.8 degrees of freedom).
 #[test]
 fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
     let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -722,6 +723,11 @@ fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
             && !a.running
     };
     assert!(step_until(&mut h, Duration::from_secs(120), done));
+    // The default held the heavy-tailed fit's odometer gain, and says so in
+    // the noise estimate and the parameter table, with that fit's sigma.
+    h.get_by_label_contains("from the heavy-tailed fit, held (least squares read 1.0385");
+    h.get_by_label("gain (held)");
+    h.get_by_label_contains("1.00861 ± 0.01444");
     h.state_mut().settings.fit.auto_noise.tails = true;
     h.state_mut().apply(gyropath::app::Command::SettingsChanged);
     h.state_mut().apply(gyropath::app::Command::Run);

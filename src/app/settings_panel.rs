@@ -159,6 +159,19 @@ impl GyropathApp {
                     ui.label("bias walk");
                     ui.label(n.walk_text("°/s/√s"));
                     ui.end_row();
+                    for c in n.calibration.iter().filter(|c| c.held) {
+                        ui.label("odometer gain").on_hover_text(
+                            "Least squares lies more than 2 of its own sigma from the gain \
+                             of a heavy-tailed (Student-t) fit of the same fixes: a run of \
+                             reflected fixes pulled it. The heavy-tailed fit's gain is held; \
+                             the rest of the fit keeps the Gaussian law.",
+                        );
+                        ui.vertical(|ui| {
+                            ui.set_max_width(230.0);
+                            ui.add(egui::Label::new(c.describe()).wrap());
+                        });
+                        ui.end_row();
+                    }
                 });
         }
         changed

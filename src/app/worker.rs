@@ -705,13 +705,28 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
             if effect.fixed(i) {
                 continue;
             }
-            param_sigmas.push(u.as_ref().and_then(|u| {
-                u.params[model.range(e).start + i]
-                    .map(|s| (s * info.scale.abs(), info.determined(s)))
-            }));
+            // A parameter held at the heavy-tailed fit's value (the gain's
+            // check) shows that fit's sigma.
+            let held = fit.noise().and_then(|n| {
+                n.calibration
+                    .iter()
+                    .find(|c| c.held && c.effect == effect.id() && c.name == info.name)
+            });
+            let sigma = match held {
+                Some(c) => c.robust_sigma,
+                None => u.as_ref().and_then(|u| u.params[model.range(e).start + i]),
+            };
+            param_sigmas.push(
+                u.as_ref()
+                    .and(sigma)
+                    .map(|s| (s * info.scale.abs(), info.determined(s))),
+            );
             params.push((
                 effect.id(),
-                info.name.clone(),
+                match held {
+                    Some(_) => format!("{} (held)", info.name),
+                    None => info.name.clone(),
+                },
                 v * info.scale,
                 info.unit.to_string(),
             ));
