@@ -11,7 +11,6 @@
 use std::path::Path;
 
 use gyropath::diagnosis::reference::{GpsErrorStatistics, match_rows};
-use gyropath::import::reference::parse_reference;
 use gyropath::import::{ImportOptions, open, read_reference};
 use gyropath::signals::Signals;
 use gyropath::simulation::{GpsEnvironment, SimConfig, simulate};
@@ -90,9 +89,8 @@ fn main() -> anyhow::Result<()> {
                 gps,
                 ..SimConfig::default()
             })?;
-            let signals =
-                Signals::from_log(&gyropath::import::parse(sim.log_csv.as_bytes(), "sim")?)?;
-            let truth = parse_reference(sim.truth_csv.as_bytes(), "truth")?;
+            let signals = Signals::from_log(&sim.log("sim")?)?;
+            let truth = sim.reference("truth")?;
             row(
                 &format!("simulate --gps {name} --seed {seed}"),
                 &signals,

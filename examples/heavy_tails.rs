@@ -14,7 +14,7 @@ use std::sync::Arc;
 use gyropath::contract::ModelSpec;
 use gyropath::contract::Role;
 use gyropath::diagnosis::reference::{compare, match_rows};
-use gyropath::import::reference::{ReferenceTrack, parse_reference};
+use gyropath::import::reference::ReferenceTrack;
 use gyropath::import::{ImportOptions, open, read_reference};
 use gyropath::optimisation::noise::heavy::{cauchy_neg2_log_likelihood, cauchy_scale, gps_misfits};
 use gyropath::optimisation::noise::neg2_log_likelihood;
@@ -99,11 +99,8 @@ fn main() -> anyhow::Result<()> {
                 gps,
                 ..SimConfig::default()
             })?;
-            let signals = Arc::new(Signals::from_log(&gyropath::import::parse(
-                sim.log_csv.as_bytes(),
-                "sim",
-            )?)?);
-            let truth = parse_reference(sim.truth_csv.as_bytes(), "truth")?;
+            let signals = Arc::new(Signals::from_log(&sim.log("sim")?)?);
+            let truth = sim.reference("truth")?;
             run(&format!("{name} {seed}"), signals, &truth)?;
         }
     }

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use gyropath::contract::ModelSpec;
 use gyropath::diagnosis::reference::{compare, match_rows};
 use gyropath::diagnosis::validation::{Folds, comparable_fixes, fix_errors, held_out};
-use gyropath::import::reference::{ReferenceTrack, parse_reference};
+use gyropath::import::reference::ReferenceTrack;
 use gyropath::import::{ImportOptions, open, read_reference};
 use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
 use gyropath::signals::Signals;
@@ -101,11 +101,8 @@ fn main() -> anyhow::Result<()> {
                 gps,
                 ..SimConfig::default()
             })?;
-            let signals = Arc::new(Signals::from_log(&gyropath::import::parse(
-                sim.log_csv.as_bytes(),
-                "sim",
-            )?)?);
-            let truth = parse_reference(sim.truth_csv.as_bytes(), "truth")?;
+            let signals = Arc::new(Signals::from_log(&sim.log("sim")?)?);
+            let truth = sim.reference("truth")?;
             run(&format!("{kind} {seed}"), signals, &truth)?;
         }
     }

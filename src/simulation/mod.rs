@@ -157,6 +157,21 @@ pub struct SimulatedRide {
     pub truth: SimTruth,
 }
 
+impl SimulatedRide {
+    /// The ride log read back as a user's file is (`name` in messages).
+    pub fn log(&self, name: &str) -> Result<crate::ride::RideLog, crate::import::LoadError> {
+        crate::import::parse(self.log_csv.as_bytes(), name)
+    }
+
+    /// The true path as a reference track, as `--reference` reads it.
+    pub fn reference(
+        &self,
+        name: &str,
+    ) -> Result<crate::import::reference::ReferenceTrack, crate::import::LoadError> {
+        crate::import::reference::parse_reference(self.truth_csv.as_bytes(), name)
+    }
+}
+
 /// Gauss-Markov process `x_{k+1} = a x_k + sqrt(1 - a^2) sigma n_k`, stationary std `sigma`.
 struct GaussMarkov {
     x: f64,
