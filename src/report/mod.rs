@@ -514,7 +514,11 @@ fn param_rows(r: &FitReport) -> Vec<ParamRow> {
             };
             values.iter().filter(|p| !p.fixed).map(move |p| ParamRow {
                 effect: effect.clone(),
-                name: p.name.clone(),
+                name: if p.held {
+                    format!("{} (held: the heavy-tailed fit's)", p.name)
+                } else {
+                    p.name.clone()
+                },
                 value: format!("{:.6}", p.value),
                 sigma: match (p.sigma, p.determined) {
                     (Some(s), true) => format!("{s:.6}"),
