@@ -308,10 +308,11 @@ fn tails_asked_for_after_the_fit_end_where_a_fresh_fit_does() {
 
 /// The default checks the odometer gain against the heavy-tailed fit
 /// (`optimisation::noise::calibration`): on Berlin least squares reads
-/// 1.0385 +- 0.0139, 2.15 sigma from the heavy-tailed 1.0086 (the CAN speed
-/// fitted to the reference: 0.992), so the robust gain is held and the path
-/// ends 6.28 m from the reference instead of 9.34 m; on the comma drive the
-/// two agree (0.45 sigma) and the Gaussian fit stands to the digit.
+/// 1.0385 +- 0.0139 against the heavy-tailed 1.0086 +- 0.0144 (the CAN speed
+/// fitted to the reference: 0.992), Hausman's test 7.7 sigma, so the robust
+/// gain is held and the path ends 6.28 m from the reference instead of 9.34
+/// m; on the comma drive the heavy-tailed fit is no less precise, the test
+/// says nothing and the Gaussian fit stands to the digit.
 #[test]
 fn the_default_holds_the_heavy_tailed_gain_where_least_squares_strays() {
     for folder in drives() {
@@ -335,7 +336,10 @@ fn the_default_holds_the_heavy_tailed_gain_where_least_squares_strays() {
         );
         match name.as_str() {
             "smartloc-berlin-potsdamer-platz" => {
-                assert!(gain.held && gain.shift() < -2.0, "{gain:?}");
+                let h = gain
+                    .hausman()
+                    .expect("the heavy-tailed fit is less precise");
+                assert!(gain.held && h > 10.83 && gain.shift() < 0.0, "{gain:?}");
                 assert!((0.99..1.02).contains(&gain.robust), "{gain:?}");
                 assert!(
                     checked_ref.horizontal.rms_m < 0.75 * plain_ref.horizontal.rms_m,
@@ -350,7 +354,7 @@ fn the_default_holds_the_heavy_tailed_gain_where_least_squares_strays() {
                 assert!(g.describe().contains("held"), "{}", g.describe());
             }
             _ => {
-                assert!(!gain.held && gain.shift().abs() < 2.0, "{gain:?}");
+                assert!(!gain.held, "{gain:?}");
                 assert_eq!(checked.params(), plain.params(), "{name}");
             }
         }

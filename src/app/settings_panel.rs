@@ -161,10 +161,11 @@ impl GyropathApp {
                     ui.end_row();
                     for c in n.calibration.iter().filter(|c| c.held) {
                         ui.label("odometer gain").on_hover_text(
-                            "Least squares lies more than 2 of its own sigma from the gain \
-                             of a heavy-tailed (Student-t) fit of the same fixes: a run of \
-                             reflected fixes pulled it. The heavy-tailed fit's gain is held; \
-                             the rest of the fit keeps the Gaussian law.",
+                            "Least squares and a heavy-tailed (Student-t) fit of the same \
+                             fixes disagree on the gain beyond chance (Hausman's test at \
+                             0.1 %): reflected fixes pulled the least squares. The \
+                             heavy-tailed fit's gain is held; the rest of the fit keeps the \
+                             Gaussian law.",
                         );
                         ui.vertical(|ui| {
                             ui.set_max_width(230.0);

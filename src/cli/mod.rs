@@ -224,12 +224,12 @@ pub struct SettingsArgs {
     /// With `--gps-noise auto`: `gain` (the default) keeps the Gaussian law
     /// but checks the odometer gain against a heavy-tailed (Student-t) fit
     /// where the ride's innovations ask for one, and holds the robust gain
-    /// where least squares lies more than 2 sigma from it (a city's
-    /// reflections lengthen the track: Berlin 9.34 -> 6.28 m from its
-    /// reference); `auto` keeps the heavy-tailed fit whole, each fix weighted
-    /// by how unlikely it is (Berlin 7.85 m; some simulated urban rides end
-    /// further from their truth); `off`: the Gaussian law alone. See
-    /// docs/real-drives.md.
+    /// where the two differ beyond chance (Hausman's test at 0.1 %: a city's
+    /// reflections lengthen the least squares' track; Berlin 9.34 -> 6.28 m
+    /// from its reference); `auto` keeps the heavy-tailed fit whole, each fix
+    /// weighted by how unlikely it is (Berlin 7.85 m; some simulated urban
+    /// rides end further from their truth); `off`: the Gaussian law alone.
+    /// See docs/real-drives.md.
     #[arg(long, value_enum, default_value_t = TailsArg::Gain)]
     pub gps_tails: TailsArg,
     /// Increment map: exact exponential or the paper's small-angle quaternion.

@@ -74,8 +74,8 @@ pub struct AutoNoise {
     #[serde(default)]
     pub tails: bool,
     /// With `gps` and without `tails`: the odometer gain checked against the
-    /// heavy-tailed fit and held at its value where the Gaussian's lies
-    /// outside its own 95 % interval of it ([`calibration`]). On by default.
+    /// heavy-tailed fit and held at its value where the two differ beyond
+    /// chance (Hausman's test, [`calibration`]). On by default.
     #[serde(default = "on")]
     pub robust_gain: bool,
 }
