@@ -694,6 +694,14 @@ impl Reconstruction {
                 Phase::Step2 if self.wants_noise() || self.wants_tails() => Phase::Noise,
                 _ => Phase::Done,
             };
+            // A gain check cut short (a round of tails broke a physical
+            // limit) ends on the Gaussian fit it set aside, not the tails'.
+            if self.phase == Phase::Done && self.gaussian_back().is_some() {
+                self.calibration.clear();
+                if let Some(n) = self.noise.take() {
+                    self.noise = Some(self.noise_found(n));
+                }
+            }
             // The next stage starts where this one converged: step 2 after
             // step 1's whole-ride window (which fitted the same parameters),
             // and step 2 after the noise search (the same path under new
@@ -852,32 +860,15 @@ impl Reconstruction {
 
     /// The end of the gain's check (see [`noise::calibration`]): the
     /// heavy-tailed fit's gain against the Gaussian fit's. Back to the
-    /// Gaussian fit as it was; where the gain moved beyond the rule, held at
-    /// the heavy-tailed value for one more step 2 under the Gaussian law.
-    /// A ride whose innovations did not ask for heavy tails never left the
+    /// Gaussian fit as it was; where the test holds the heavy-tailed gain,
+    /// one more step 2 under the Gaussian law with the gain held there. A
+    /// ride whose innovations did not ask for heavy tails never left the
     /// Gaussian fit.
     fn check_calibration(&mut self, mut outcome: StepOutcome) -> IterationReport {
-        let gaussian = self
-            .gaussian_fit
-            .take()
-            .filter(|(t, _)| t.len() == self.model.n_params());
-        let Some((gaussian_theta, step2_iterations)) = gaussian else {
+        let Some((robust, robust_theta)) = self.gaussian_back() else {
             self.phase = Phase::Done;
             return self.report(Phase::Noise, outcome, true);
         };
-        self.tails = None;
-        self.tail_summary = None;
-        let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
-        let gaussian =
-            match Model::with_start(self.model.signals.clone(), spec, self.model.start.clone()) {
-                Ok(m) => m,
-                Err(_) => {
-                    self.phase = Phase::Done;
-                    return self.report(Phase::Noise, outcome, true);
-                }
-            };
-        let robust = std::mem::replace(&mut self.model, gaussian);
-        let robust_theta = std::mem::replace(&mut self.theta, gaussian_theta);
         self.calibration =
             noise::calibration::check(&self.model, &self.theta, &robust, &robust_theta);
         if let Some(n) = self.noise.take() {
@@ -892,9 +883,33 @@ impl Reconstruction {
             self.phase_iterations[1] = 0;
         } else {
             self.phase = Phase::Done;
-            self.phase_iterations[1] = step2_iterations;
         }
         self.report(Phase::Noise, outcome, !held)
+    }
+
+    /// The Gaussian fit the gain's check set aside, back in force (its
+    /// model, parameters and step-2 iterations), the tails dropped; returns
+    /// the heavy-tailed fit it replaces. `None` (and nothing changed) when
+    /// no check is under way or the Gaussian model cannot be rebuilt.
+    fn gaussian_back(&mut self) -> Option<(Model, Vec<f64>)> {
+        let (theta, iterations) = self
+            .gaussian_fit
+            .take()
+            .filter(|(t, _)| t.len() == self.model.n_params())?;
+        let tails = self.tails.take();
+        let spec = self.effective_spec(&self.settings.model, self.settings.auto_noise);
+        let Ok(gaussian) =
+            Model::with_start(self.model.signals.clone(), spec, self.model.start.clone())
+        else {
+            self.tails = tails;
+            return None;
+        };
+        self.tail_summary = None;
+        self.phase_iterations[1] = iterations;
+        Some((
+            std::mem::replace(&mut self.model, gaussian),
+            std::mem::replace(&mut self.theta, theta),
+        ))
     }
 
     /// The model rebuilt under the settings now in force (the noise and
