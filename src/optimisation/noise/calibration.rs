@@ -10,7 +10,7 @@
 //! heavy-tailed fit ([`super::tails`]: each fix weighed by how unlikely its
 //! innovation is under a Student-t law the ride's own innovations chose)
 //! discounts that run and reads 1.0086. Held at that, the rest of the model
-//! under the Gaussian law ends 6.36 m off.
+//! under the Gaussian law ends 6.28 m off.
 //!
 //! Why not simply the heavy-tailed fit: its weights also move the local path,
 //! and there they are not safe. On 7 of 28 simulated urban and city rides it
