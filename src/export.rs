@@ -617,7 +617,6 @@ impl FitReport {
         let fixed_mask = fixed.clone();
         // Read before the loop below takes the sigmas.
         let bias_sigmas = crate::diagnosis::segment_sigmas(model, &sigmas);
-        let checks = fit.noise().map_or(&[][..], |n| &n.calibration[..]);
         for ((((effect, info), value), fixed), sigma) in model
             .param_infos()
             .into_iter()
@@ -626,9 +625,7 @@ impl FitReport {
             .zip(sigmas)
         {
             // A held parameter was fitted, by the heavy-tailed fit: its sigma.
-            let held = checks
-                .iter()
-                .find(|c| c.held && c.effect == effect && c.name == info.name);
+            let held = fit.noise().and_then(|n| n.held(&effect, &info.name));
             let sigma = held.map_or(sigma, |c| c.robust_sigma);
             let determined = sigma.is_none_or(|s| info.determined(s));
             parameters.entry(effect).or_default().push(ParamValue {

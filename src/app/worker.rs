@@ -707,11 +707,7 @@ pub fn snapshot(fit: &Reconstruction, u: Option<&crate::model::Uncertainty>) -> 
             }
             // A parameter held at the heavy-tailed fit's value (the gain's
             // check) shows that fit's sigma.
-            let held = fit.noise().and_then(|n| {
-                n.calibration
-                    .iter()
-                    .find(|c| c.held && c.effect == effect.id() && c.name == info.name)
-            });
+            let held = fit.noise().and_then(|n| n.held(&effect.id(), &info.name));
             let sigma = match held {
                 Some(c) => c.robust_sigma,
                 None => u.as_ref().and_then(|u| u.params[model.range(e).start + i]),

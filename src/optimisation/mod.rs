@@ -696,11 +696,8 @@ impl Reconstruction {
             };
             // A gain check cut short (a round of tails broke a physical
             // limit) ends on the Gaussian fit it set aside, not the tails'.
-            if self.phase == Phase::Done && self.gaussian_back().is_some() {
-                self.calibration.clear();
-                if let Some(n) = self.noise.take() {
-                    self.noise = Some(self.noise_found(n));
-                }
+            if self.phase == Phase::Done {
+                self.gaussian_back();
             }
             // The next stage starts where this one converged: step 2 after
             // step 1's whole-ride window (which fitted the same parameters),
@@ -767,11 +764,13 @@ impl Reconstruction {
         spec
     }
 
-    /// The noise settings estimated, with the tails' summary and the gain's check.
-    fn noise_found(&self, mut n: NoiseEstimate) -> NoiseEstimate {
-        n.gps_tails = self.tail_summary.clone();
-        n.calibration = self.calibration.clone();
-        n
+    /// The noise estimate in force told the tails' summary and the gain's
+    /// check as they now stand.
+    fn refresh_noise(&mut self) {
+        if let Some(n) = &mut self.noise {
+            n.gps_tails = self.tail_summary.clone();
+            n.calibration = self.calibration.clone();
+        }
     }
 
     /// The noise phase's one iteration: search the likelihood, rebuild the
@@ -795,7 +794,8 @@ impl Reconstruction {
             evaluation: None,
         };
         if let Some(n) = found {
-            self.noise = Some(self.noise_found(n));
+            self.noise = Some(n);
+            self.refresh_noise();
             self.rebuild(&mut outcome);
         }
         self.iteration += 1;
@@ -849,9 +849,7 @@ impl Reconstruction {
                 .map_or(0, |t| t.scale.iter().filter(|&&f| f >= 2.0).count()),
         };
         self.tail_summary = Some(summary);
-        if let Some(n) = self.noise.take() {
-            self.noise = Some(self.noise_found(n));
-        }
+        self.refresh_noise();
         self.rebuild(&mut outcome);
         self.phase = Phase::Step2;
         self.phase_iterations[1] = 0;
@@ -871,9 +869,7 @@ impl Reconstruction {
         };
         self.calibration =
             noise::calibration::check(&self.model, &self.theta, &robust, &robust_theta);
-        if let Some(n) = self.noise.take() {
-            self.noise = Some(self.noise_found(n));
-        }
+        self.refresh_noise();
         outcome.cost = self.model.cost(&self.theta);
         outcome.accepted = true;
         let held = self.calibration.iter().any(|c| c.held);
@@ -888,9 +884,10 @@ impl Reconstruction {
     }
 
     /// The Gaussian fit the gain's check set aside, back in force (its
-    /// model, parameters and step-2 iterations), the tails dropped; returns
-    /// the heavy-tailed fit it replaces. `None` (and nothing changed) when
-    /// no check is under way or the Gaussian model cannot be rebuilt.
+    /// model, parameters and step-2 iterations), the tails dropped from it
+    /// and from the noise estimate; returns the heavy-tailed fit it
+    /// replaces. `None` (and nothing changed) when no check is under way or
+    /// the Gaussian model cannot be rebuilt.
     fn gaussian_back(&mut self) -> Option<(Model, Vec<f64>)> {
         let (theta, iterations) = self
             .gaussian_fit
@@ -905,6 +902,7 @@ impl Reconstruction {
             return None;
         };
         self.tail_summary = None;
+        self.refresh_noise();
         self.phase_iterations[1] = iterations;
         Some((
             std::mem::replace(&mut self.model, gaussian),

@@ -145,6 +145,14 @@ impl NoiseEstimate {
         spec
     }
 
+    /// The check of parameter `name` of `effect` where it held the
+    /// heavy-tailed fit's value (see [`super::calibration`]).
+    pub fn held(&self, effect: &str, name: &str) -> Option<&super::calibration::CalibrationCheck> {
+        self.calibration
+            .iter()
+            .find(|c| c.held && c.effect == effect && c.name == name)
+    }
+
     /// The GPS error's correlation in words: "correlated over 3 s (2-4)", or independent fixes.
     pub fn tau_text(&self) -> String {
         if self.gps_tau_s.limit == Limit::AtLeast {
