@@ -476,6 +476,7 @@ fn estimate_on(
                 side_by_side,
             },
             value,
+            f64::INFINITY,
         );
     }
     let evaluations = evaluations.into_inner();
@@ -854,6 +855,7 @@ mod tests {
                 side_by_side: false,
             },
             7.0,
+            f64::INFINITY,
         );
         assert!((reach - 0.5).abs() < 0.05, "{reach}");
         // Flat: no edge within the steps.
@@ -864,8 +866,26 @@ mod tests {
                 side_by_side: true,
             },
             7.0,
+            f64::INFINITY,
         );
         assert!(reach.is_infinite(), "{reach}");
+        // Flat up to a bound: the range reaches the bound and no further;
+        // rising by 1 before it: found between the last step and the bound.
+        let objective = Objective {
+            f: &flat,
+            side_by_side: true,
+        };
+        assert_eq!(one_sided(objective, 7.0, 6.0), 6.0);
+        let late = |t: &[f64]| 7.0 + (t[0] / 4.0).powi(2);
+        let reach = one_sided(
+            Objective {
+                f: &late,
+                side_by_side: false,
+            },
+            7.0,
+            8.0,
+        );
+        assert!((reach - 4.0).abs() < 0.4, "{reach}");
     }
 
     #[test]

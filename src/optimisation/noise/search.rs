@@ -11,14 +11,28 @@ pub(super) const ONE_SIDED_STEPS: [f64; 4] = [0.35, 0.7, 1.4, 2.8];
 pub(super) const ONE_SIDED_HALVINGS: usize = 3;
 
 /// How far `t >= 0` goes before `f(t)` rises by 1 above `f0 = f(0)` (the
-/// 1-sigma edge of `-2 ln L`): bracketed by [`ONE_SIDED_STEPS`] (side by
-/// side), the bracket halved [`ONE_SIDED_HALVINGS`] times, then
-/// interpolated; infinite if it does not rise that much within the steps.
-pub(super) fn one_sided(f: Objective, f0: f64) -> f64 {
-    let points: Vec<Vec<f64>> = ONE_SIDED_STEPS.iter().map(|&t| vec![t]).collect();
+/// 1-sigma edge of `-2 ln L`): bracketed by [`ONE_SIDED_STEPS`] short of
+/// `wall` and `wall` itself (side by side), the bracket halved
+/// [`ONE_SIDED_HALVINGS`] times, then interpolated; `wall` (where the
+/// search's bounds stop `t`) if it does not rise that much before it.
+///
+/// Without the step at the wall a direction still flat at the last step
+/// read as infinite, and every setting with a share of it as unbounded:
+/// with the bias walk estimated on Berlin's drive, whose walk is flat
+/// towards zero, the GPS sigma was reported as "13.39 m (12.27-100.00)".
+pub(super) fn one_sided(f: Objective, f0: f64, wall: f64) -> f64 {
+    let mut steps: Vec<f64> = ONE_SIDED_STEPS
+        .iter()
+        .copied()
+        .filter(|&t| t < wall)
+        .collect();
+    if wall.is_finite() {
+        steps.push(wall);
+    }
+    let points: Vec<Vec<f64>> = steps.iter().map(|&t| vec![t]).collect();
     let values = f.values(&points);
     let (mut lo, mut rise_lo) = (0.0, 0.0);
-    for (&t, v) in ONE_SIDED_STEPS.iter().zip(values) {
+    for (&t, v) in steps.iter().zip(values) {
         let rise = v - f0;
         if rise >= 1.0 {
             let (mut hi, mut rise_hi) = (t, rise);
@@ -35,7 +49,7 @@ pub(super) fn one_sided(f: Objective, f0: f64) -> f64 {
         }
         (lo, rise_lo) = (t, rise.max(rise_lo));
     }
-    f64::INFINITY
+    wall
 }
 
 /// A function of the log-settings, evaluated side by side where it can be.
@@ -283,7 +297,11 @@ pub(super) fn newton(
     }
     if let Some(stencil) = last {
         let hess = stencil.symmetric_hessian(&f, h);
-        for (i, (b, a)) in stencil.ranges(&f, &hess, &x, value).into_iter().enumerate() {
+        for (i, (b, a)) in stencil
+            .ranges(&f, &hess, &x, value, bounds)
+            .into_iter()
+            .enumerate()
+        {
             below[stencil.free[i]] = b;
             above[stencil.free[i]] = a;
         }
@@ -371,6 +389,7 @@ impl Stencil {
         hess: &DMatrix<f64>,
         at: &[f64],
         value: f64,
+        bounds: &[(f64, f64)],
     ) -> Vec<(f64, f64)> {
         let m = self.free.len();
         let eigen = hess.clone().symmetric_eigen();
@@ -386,6 +405,20 @@ impl Stencil {
                 continue;
             }
             for sign in [1.0, -1.0] {
+                // Where the first free setting meets its bound along `sign v`.
+                let wall = (0..m)
+                    .filter(|&i| v[i].abs() > 1e-12)
+                    .map(|i| {
+                        let (lo, hi) = bounds[self.free[i]];
+                        let step = sign * v[i];
+                        let room = if step > 0.0 {
+                            hi - at[self.free[i]]
+                        } else {
+                            at[self.free[i]] - lo
+                        };
+                        room.max(0.0) / step.abs()
+                    })
+                    .fold(f64::INFINITY, f64::min);
                 let along = |t: &[f64]| {
                     let mut y = at.to_vec();
                     for i in 0..m {
@@ -399,6 +432,7 @@ impl Stencil {
                         side_by_side: f.side_by_side,
                     },
                     value,
+                    wall,
                 );
                 for i in 0..m {
                     let reach = sign * v[i];
