@@ -268,6 +268,12 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
             describe_estimates(&c.estimate)
         );
     }
+    if d.reference.is_some() {
+        _ = writeln!(
+            out,
+            "          to ref: the model with the effect, fitted as `gyropath fit` fits it (the noise from the ride), against the reference"
+        );
+    }
     if !d.not_physical.is_empty() {
         _ = writeln!(out);
         _ = writeln!(
