@@ -625,16 +625,26 @@ impl Reconstruction {
             };
             // A window that will be widened only has to bring the fit into the
             // right basin; the next window refines it.
-            let tol = match (&self.window, phase) {
-                (Some(_), Phase::Step1) => tol.max(WINDOW_TOLERANCE),
-                _ => tol,
+            let near_enough = matches!((&self.window, phase), (Some(_), Phase::Step1));
+            let tol = if near_enough {
+                tol.max(WINDOW_TOLERANCE)
+            } else {
+                tol
             };
             // A system given for the start serves only the iteration it was
             // made for: the same parameters free, at the same point.
             let start = self.start_system.take().filter(|c| {
                 phase == Phase::Step2 && crate::model::free_columns(&free) == c.columns()
             });
-            lm::iterate(start, model, &mut self.theta, &free, &mut self.lm, tol)
+            lm::iterate(
+                start,
+                model,
+                &mut self.theta,
+                &free,
+                &mut self.lm,
+                tol,
+                near_enough,
+            )
         } else {
             let c = self.model.cost(&self.theta);
             StepOutcome {
