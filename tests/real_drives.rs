@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use gyropath::diagnosis::reference::{self, Matched, ReferenceComparison};
-use gyropath::diagnosis::{Folds, diagnose_fitted_against};
+use gyropath::diagnosis::{Diagnosis, Folds, diagnose_fitted_against};
 use gyropath::import::reference::ReferenceTrack;
 use gyropath::import::{ImportOptions, read_reference};
 use gyropath::optimisation::{AutoNoise, FitSettings, Reconstruction};
@@ -64,6 +64,20 @@ fn fit(d: &Drive, settings: FitSettings) -> (Reconstruction, ReferenceComparison
     (f, c)
 }
 
+/// The app's Diagnose of `current`, fitted under `settings`, with the
+/// drive's reference.
+fn diagnose(d: &Drive, current: &Reconstruction, settings: &FitSettings) -> Diagnosis {
+    diagnose_fitted_against(
+        current.model(),
+        current.params(),
+        settings,
+        &Folds::default(),
+        Some((&d.reference, &d.matched)),
+        &|_: &str| {},
+    )
+    .expect("diagnose")
+}
+
 /// What the app's Diagnose and Add do, until nothing significant is left:
 /// the effects added, in order, and the last fit against the reference.
 fn workflow(d: &Drive) -> (Vec<String>, ReferenceComparison) {
@@ -71,15 +85,7 @@ fn workflow(d: &Drive) -> (Vec<String>, ReferenceComparison) {
     let (mut current, mut c) = fit(d, settings.clone());
     let mut added = Vec::new();
     for _ in 0..4 {
-        let diagnosis = diagnose_fitted_against(
-            current.model(),
-            current.params(),
-            &settings,
-            &Folds::default(),
-            Some((&d.reference, &d.matched)),
-            &|_: &str| {},
-        )
-        .expect("diagnose");
+        let diagnosis = diagnose(d, &current, &settings);
         let Some(top) = diagnosis.ranking.first().filter(|c| c.significant) else {
             break;
         };
@@ -372,15 +378,7 @@ fn the_diagnosis_measures_against_the_reference_what_fit_gives() {
     let d = open(&shared_real().join("smartloc-berlin-potsdamer-platz"));
     let settings = FitSettings::default();
     let (current, held) = fit(&d, settings.clone());
-    let diagnosis = diagnose_fitted_against(
-        current.model(),
-        current.params(),
-        &settings,
-        &Folds::default(),
-        Some((&d.reference, &d.matched)),
-        &|_: &str| {},
-    )
-    .expect("diagnose");
+    let diagnosis = diagnose(&d, &current, &settings);
     let base = diagnosis
         .reference
         .as_ref()
