@@ -538,6 +538,31 @@ fn a_reference_track_is_drawn_and_the_history_says_how_far_each_model_is_from_it
         "the map's legend"
     );
 
+    // Diagnose with the reference loaded: each candidate measured against
+    // it as `diagnose --reference` measures it (the model with the effect,
+    // fitted as Fit fits it), in a column of its own.
+    h.get_by_label("Diagnose").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(180), |a| a.diagnosis.is_some()),
+        "diagnosis: {:?}",
+        h.state().error
+    );
+    let d = h.state().diagnosis.clone().expect("diagnosis");
+    let base = d
+        .reference
+        .as_ref()
+        .expect("the model against the reference");
+    assert_eq!(base.horizontal.rms_m, to_ref);
+    let lag = d
+        .ranking
+        .iter()
+        .find(|c| c.effect == "gps_lag")
+        .and_then(|c| c.reference.as_ref())
+        .expect("gps_lag against the reference");
+    // With the lag the path is half a metre from comma's reference.
+    assert!(lag.horizontal.rms_m < 0.6, "{:?}", lag.horizontal);
+    assert!(h.query_all_by_label("to ref").count() >= 1);
+
     // File > Save report (HTML): the page has the reference, the model
     // history the app shows, and the ride's checks.
     let dir = tempfile::tempdir().expect("temp dir");

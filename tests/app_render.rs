@@ -5,6 +5,7 @@
 use std::time::{Duration, Instant};
 
 use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
 use gyropath::app::map_tiles::{MapBackground, Status, TileServer as MapServer};
 use gyropath::app::{AppSettings, GyropathApp, sample_ride};
 
@@ -317,6 +318,34 @@ fn the_reference_track_is_drawn_on_the_map_and_its_error_in_the_residual_plot() 
     let plots = changed(&without, &with, 0.5..1.0, 0.45..0.7);
     assert!(map > 300, "{map} map pixels changed");
     assert!(plots > 100, "{plots} residual-plot pixels changed");
+    // Diagnose with the reference loaded: a "to ref" column, each candidate
+    // fitted as Fit fits it (Berlin: none nearer than the model's 6.28 m).
+    h.state_mut().apply(gyropath::app::Command::Diagnose);
+    wait(&mut h, &|a| a.diagnosis.is_some() && a.diagnosing.is_none());
+    let diagnosed = h.render().expect("render");
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("berlin-diagnosis.png");
+    diagnosed.save(&out).expect("png");
+    eprintln!("rendered {}", out.display());
+    assert!(h.query_all_by_label("to ref").count() >= 1);
+    let d = h.state().diagnosis.clone().expect("diagnosis");
+    let model = d
+        .reference
+        .as_ref()
+        .expect("the model against the reference");
+    assert!(
+        d.ranking
+            .iter()
+            .filter_map(|c| c.reference.as_ref())
+            .all(|r| r.horizontal.rms_m > model.horizontal.rms_m - 0.05),
+        "{:?}",
+        d.ranking
+            .iter()
+            .map(|c| (
+                c.effect.clone(),
+                c.reference.as_ref().map(|r| r.horizontal.rms_m)
+            ))
+            .collect::<Vec<_>>()
+    );
 }
 
 #[test]

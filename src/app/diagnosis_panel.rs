@@ -43,8 +43,11 @@ impl GyropathApp {
             0 => String::new(),
             n => format!(" ({n} jumps out)"),
         };
+        let to_reference = d.reference.as_ref().map_or(String::new(), |r| {
+            format!(", {:.2} m to the reference", r.horizontal.rms_m)
+        });
         ui.label(format!(
-            "{}: fit {:.3} m, held-out {:.3} m{jumps}",
+            "{}: fit {:.3} m, held-out {:.3} m{jumps}{to_reference}",
             short_model(&d.model.join(", ")),
             d.fit_rms_m,
             d.heldout_rms_m
@@ -74,13 +77,20 @@ impl GyropathApp {
                 // The estimates go under each effect's name, wrapped to what
                 // is left of the panel: as a column of their own they ran
                 // off its right edge, where a narrow panel hid them.
-                let name_w = (ui.available_width() - 200.0).max(160.0);
+                let with_reference = d.reference.is_some();
+                let name_w =
+                    (ui.available_width() - if with_reference { 270.0 } else { 200.0 }).max(160.0);
                 egui::Grid::new("ranking")
-                    .num_columns(4)
+                    .num_columns(if with_reference { 5 } else { 4 })
                     .striped(true)
                     .show(ui, |ui| {
                         for h in ["", "effect (estimate)", "held-out", "drop (t)"] {
                             ui.strong(h);
+                        }
+                        if with_reference {
+                            ui.strong("to ref").on_hover_text(
+                                "the model with the effect added, fitted as Fit fits it (the noise from the ride), against the reference track: what Add gives",
+                            );
                         }
                         ui.end_row();
                         for c in &d.ranking {
@@ -119,12 +129,20 @@ impl GyropathApp {
                             if c.error.is_some() {
                                 ui.label("-");
                                 ui.label("-");
+                                if with_reference {
+                                    ui.label("-");
+                                }
                             } else {
                                 ui.label(format!("{:.3} m", c.heldout_rms_m));
                                 ui.label(format!("{:+.1} % ({:.1})", 100.0 * c.drop, c.t_statistic))
                                 .on_hover_text(
                                     "drop: how much lower the held-out error is; t: how consistent the gain is across the validation blocks (significant: drop at least 2 % and t at least 3, or at least 10 % and 1.5)",
                                 );
+                                if with_reference {
+                                    ui.label(c.reference.as_ref().map_or("-".to_string(), |r| {
+                                        format!("{:.2} m", r.horizontal.rms_m)
+                                    }));
+                                }
                             }
                             ui.end_row();
                         }

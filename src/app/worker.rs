@@ -14,8 +14,8 @@ use std::time::{Duration, Instant};
 use crate::diagnosis::reference::{self, Matched};
 use crate::diagnosis::view::{decimated_rows, peaks};
 use crate::diagnosis::{
-    Diagnosis, FitView, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias, diagnose_fitted,
-    held_out_rms,
+    Diagnosis, FitView, FixResidual, Folds, HeldOutRms, ResidualRms, SegmentBias,
+    diagnose_fitted_against, held_out_rms,
 };
 use crate::export::{write_atomically, write_json, write_path_csv, write_path_gpx, write_path_tum};
 use crate::import::ReferenceTrack;
@@ -539,6 +539,9 @@ impl Worker {
             ));
             return;
         };
+        // With a reference track loaded, every candidate is also measured
+        // against it, as `diagnose --reference` does.
+        let reference = self.ride.as_ref().and_then(|r| r.reference.clone());
         let tx = self.tx.clone();
         let wake = self.wake_handle();
         self.send(Update::DiagnosisProgress("starting".into()));
@@ -551,11 +554,20 @@ impl Worker {
                 }
                 progress_wake();
             };
-            let update =
-                match diagnose_fitted(&model, &theta, &settings, &Folds::default(), &progress) {
-                    Ok(d) => Update::Diagnosis(Box::new(d)),
-                    Err(e) => Update::Error(format!("diagnosis failed: {e}")),
-                };
+            let against = reference
+                .as_deref()
+                .map(|(track, matched)| (track, matched));
+            let update = match diagnose_fitted_against(
+                &model,
+                &theta,
+                &settings,
+                &Folds::default(),
+                against,
+                &progress,
+            ) {
+                Ok(d) => Update::Diagnosis(Box::new(d)),
+                Err(e) => Update::Error(format!("diagnosis failed: {e}")),
+            };
             let _ = tx.send(update);
             wake();
         });
