@@ -319,6 +319,18 @@ fn chain_solver_gives_the_dense_lm_step() {
                 "{fast_predicted} vs {predicted}"
             );
         }
+        // The likelihood's pass: the linearised cost at its minimum, left
+        // below the QR's triangle, against the dense minimum
+        // `C - g^T A^-1 g`, and the log-determinant of the full pass.
+        let (fit, log_det) = chain.fit_with_log_det().unwrap();
+        let dense = damped_solve(&ne.a, &-&ne.g, 0.0).unwrap();
+        let dense_fit = ne.cost + dense.dot(&ne.g);
+        assert!(
+            (fit - dense_fit).abs() < 1e-8 * ne.cost,
+            "minimum {fit} vs {dense_fit}"
+        );
+        let (_, full_ld) = chain.solve_with_log_det(0.0).unwrap();
+        assert!((log_det - full_ld).abs() < 1e-9 * full_ld.abs().max(1.0));
     }
 }
 

@@ -10,6 +10,10 @@ use super::*;
 /// it leaves for a backward pass.
 pub(super) struct Solved {
     pub(super) log_det: f64,
+    /// `min ||A x - b||^2` over the whole damped array: the squared
+    /// right-hand sides that the QR leaves below the triangle (rows with no
+    /// unknown left), summed as they fall out (see [`Work::compress`]).
+    pub(super) residual: f64,
     pub(super) forward: Forward,
 }
 
@@ -72,6 +76,62 @@ pub(super) enum Op {
     },
 }
 
+/// The changes of a forward pass, in order, for the backward pass; and the
+/// log-determinant of the eliminated unknowns' rows as they go. A pass
+/// whose caller wants only the likelihood ([`ChainSystem::fit_with_log_det`])
+/// counts them without keeping them: a noise likelihood copied out and
+/// later freed a row for every fix and axis it never read.
+pub(super) struct Ops {
+    pub(super) list: Vec<Op>,
+    keep: bool,
+    count: usize,
+    /// `sum 2 ln |R_ii|` over the eliminated rows.
+    pub(super) log_det: f64,
+}
+
+impl Ops {
+    pub(super) fn new(keep: bool) -> Self {
+        Self {
+            list: Vec::new(),
+            keep,
+            count: 0,
+            log_det: 0.0,
+        }
+    }
+
+    /// Whether the changes are kept (or only counted).
+    pub(super) fn keeps(&self) -> bool {
+        self.keep
+    }
+
+    /// Changes made so far, kept or not.
+    pub(super) fn len(&self) -> usize {
+        self.count
+    }
+
+    pub(super) fn push(&mut self, op: Op) {
+        if let Op::Eliminate { rows, .. } = &op {
+            self.add_diagonal((0..rows.nrows()).map(|i| rows[(i, i)]));
+        }
+        self.count += 1;
+        if self.keep {
+            self.list.push(op);
+        }
+    }
+
+    /// An elimination not kept, by the diagonal of its rows.
+    pub(super) fn eliminated(&mut self, diagonal: impl Iterator<Item = f64>) {
+        self.add_diagonal(diagonal);
+        self.count += 1;
+    }
+
+    fn add_diagonal(&mut self, diagonal: impl Iterator<Item = f64>) {
+        for d in diagonal {
+            self.log_det += 2.0 * d.abs().ln();
+        }
+    }
+}
+
 /// The information array of the forward pass.
 pub(super) struct Work {
     /// Wander unknowns in column order (first in the array, at most one per
@@ -85,6 +145,9 @@ pub(super) struct Work {
     /// Rows waiting to be folded in.
     pub(super) pending: Vec<Vec<f64>>,
     pub(super) origin: Vector3<f64>,
+    /// Squared right-hand sides of the rows that left the array with no
+    /// unknown in them: the least-squares residual so far.
+    pub(super) residual: f64,
     /// Buffers reused from fix to fix: allocating a fix's rows, arrays and
     /// vectors afresh was about a quarter of a noise likelihood's time.
     pub(super) scratch: Scratch,
@@ -171,6 +234,12 @@ impl Work {
             spare.push(row);
         }
         triangularise_in(stack, nr, n, tri, reflector);
+        // Rows past the `n` of the triangle have no unknown left: what their
+        // right-hand side holds no step can fit.
+        self.residual += dot(
+            &stack[n * nr + n..(n + 1) * nr],
+            &stack[n * nr + n..(n + 1) * nr],
+        );
         self.rows = block_of(stack, nr, (0, 0), (n, n + 1));
     }
 
@@ -273,7 +342,14 @@ impl Work {
     /// rows `0..=c` (the new wander now leads row `c`) and rows without any
     /// entry there, which wait in `pending`. So a fix costs O(c n) instead of
     /// a new column, a compression and a permuted copy of the whole array.
-    pub(super) fn pass_wander(&mut self, c: usize, o: usize, r: Vec<f64>, h: Vec<f64>) -> Op {
+    pub(super) fn pass_wander(
+        &mut self,
+        c: usize,
+        o: usize,
+        r: Vec<f64>,
+        h: Vec<f64>,
+        ops: &mut Ops,
+    ) {
         let n = self.n();
         let Scratch {
             array,
@@ -321,10 +397,15 @@ impl Work {
             self.pending.push(row);
         }
         let prev = std::mem::replace(&mut self.wander[c], o);
-        Op::Eliminate {
-            what: Unknown::Wander(prev),
-            rows: block_of(array, nl, (0, 0), (1, nc)),
-            rest: self.front(),
+        if ops.keeps() {
+            let rows = block_of(array, nl, (0, 0), (1, nc));
+            ops.push(Op::Eliminate {
+                what: Unknown::Wander(prev),
+                rows,
+                rest: self.front(),
+            });
+        } else {
+            ops.eliminated(std::iter::once(array[0]));
         }
     }
 
@@ -468,8 +549,11 @@ pub(super) fn six(y: &V9, c: &Vector3<f64>) -> [f64; 6] {
 }
 
 impl ChainSystem {
-    /// The forward pass (see the module docs); the step is its back-substitution.
-    pub(super) fn run(&self, lambda: f64, track: bool) -> Option<Solved> {
+    /// The forward pass (see the module docs); the step is its
+    /// back-substitution. With `keep` false the changes are not kept
+    /// (`forward.ops` is empty: no backward pass), only the log-determinant
+    /// and the residual.
+    pub(super) fn run(&self, lambda: f64, track: bool, keep: bool) -> Option<Solved> {
         let lin = &self.lin;
         let ng = lin.globals.len();
         let scale: Vec<f64> = self.diag.iter().map(|d| d.sqrt()).collect();
@@ -486,9 +570,10 @@ impl ChainSystem {
             rows: DMatrix::zeros(0, 7 + ng),
             pending: Vec::new(),
             origin: Vector3::zeros(),
+            residual: 0.0,
             scratch: Scratch::default(),
         };
-        let mut ops: Vec<Op> = Vec::new();
+        let mut ops = Ops::new(keep);
         // Heavy rows defining a wander (each adds exactly its weight squared to the determinant).
         let mut constraint_log_det = 0.0;
         let mut wander_at = vec![usize::MAX; lin.r.len()];
@@ -518,12 +603,12 @@ impl ChainSystem {
             }
             self.add_priors(work, b + 1, &scale);
         };
-        let eliminate = |work: &mut Work, ops: &mut Vec<Op>, completed: usize| {
+        let eliminate = |work: &mut Work, ops: &mut Ops, completed: usize| {
             while work.first_done(completed) {
                 ops.push(work.eliminate_first());
             }
         };
-        let complete = |work: &mut Work, ops: &mut Vec<Op>, b: usize| {
+        let complete = |work: &mut Work, ops: &mut Ops, b: usize| {
             work.compress();
             let c0 = work.col_of(b).unwrap_or(0);
             let s0 = work.s0();
@@ -550,13 +635,13 @@ impl ChainSystem {
         // Blocks opened and completed so far: every block ending before `row`
         // completed, every block starting by it open.
         let mut cursor = Cursor::default();
-        let open_next = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor| {
+        let open_next = |work: &mut Work, ops: &mut Ops, cursor: &mut Cursor| {
             cursor.open_at.push(ops.len());
             open(work, cursor.opened);
             cursor.opened += 1;
             eliminate(work, ops, cursor.completed);
         };
-        let advance = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor, row: usize| loop {
+        let advance = |work: &mut Work, ops: &mut Ops, cursor: &mut Cursor, row: usize| loop {
             while cursor.completed < cursor.opened && blocks[cursor.completed].last < row {
                 complete(work, ops, cursor.completed);
                 cursor.completed += 1;
@@ -569,7 +654,7 @@ impl ChainSystem {
         };
         // With `track`, the state each row of the path is seen in: as if every
         // row were an observation (the order of the changes does not change the solution).
-        let track_to = |work: &mut Work, ops: &mut Vec<Op>, cursor: &mut Cursor, end: usize| {
+        let track_to = |work: &mut Work, ops: &mut Ops, cursor: &mut Cursor, end: usize| {
             while track && cursor.next_row < end {
                 advance(work, ops, cursor, cursor.next_row);
                 if cursor.stages.last().is_none_or(|s| s.ops != ops.len()) {
@@ -666,7 +751,7 @@ impl ChainSystem {
                 // becomes this one's (see `Work::pass_wander`).
                 (Some(p), Some((mut c, _))) if work.rows.nrows() > p => {
                     c.swap(0, p + 1);
-                    ops.push(work.pass_wander(p, o, r, c));
+                    work.pass_wander(p, o, r, c, &mut ops);
                 }
                 (_, wander) => {
                     work.pending.push(r);
@@ -697,14 +782,8 @@ impl ChainSystem {
         work.compress();
 
         let mut log_det =
-            self.diag.iter().map(|d| d.ln()).sum::<f64>() - 12.0 * PIN.ln() - constraint_log_det;
-        for op in &ops {
-            if let Op::Eliminate { rows, .. } = op {
-                for i in 0..rows.nrows() {
-                    log_det += 2.0 * rows[(i, i)].abs().ln();
-                }
-            }
-        }
+            self.diag.iter().map(|d| d.ln()).sum::<f64>() - 12.0 * PIN.ln() - constraint_log_det
+                + ops.log_det;
         for i in 0..work.rows.nrows() {
             log_det += 2.0 * work.rows[(i, i)].abs().ln();
         }
@@ -712,14 +791,18 @@ impl ChainSystem {
         let forward = Forward {
             front: work.front(),
             rows: work.rows,
-            ops,
+            ops: ops.list,
             scale,
             stages: cursor.stages,
             open_at: cursor.open_at,
             wander_at,
             origin: work.origin,
         };
-        Some(Solved { log_det, forward })
+        Some(Solved {
+            log_det,
+            residual: work.residual,
+            forward,
+        })
     }
 
     /// Columns of an unknown of the array.

@@ -233,7 +233,7 @@ impl ChainSystem {
     /// 2.5 kB per state: 29 MB for every row of a 6-hour ride, a few MB for
     /// the few thousand rows a view draws.
     pub(crate) fn marginals(&self, rows: PathRows) -> Option<Marginals> {
-        let solved = self.run(0.0, !matches!(rows, PathRows::None))?;
+        let solved = self.run(0.0, !matches!(rows, PathRows::None), true)?;
         let f = &solved.forward;
         let lin = &self.lin;
         let blocks = &lin.blocks;

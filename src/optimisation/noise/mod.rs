@@ -243,8 +243,7 @@ pub fn neg2_log_likelihood(
     let mut m = model.with_spec(spec.clone()).ok()?;
     m.weigh_updates(theta, &base.linearisation().x);
     let chain = m.chain_system_like(base, theta)?;
-    let (delta, log_det) = chain.solve_with_log_det(0.0)?;
-    let fit = chain.cost() - chain.predicted_decrease(&delta);
+    let (fit, log_det) = chain.fit_with_log_det()?;
     let v = fit + m.noise_log_det(theta, free) + log_det;
     v.is_finite().then_some(v)
 }
