@@ -71,7 +71,7 @@ pub fn cauchy_neg2_log_likelihood(
         .ok()?
         .least_squares(true);
     let chain = m.chain_system(theta, free)?;
-    let (_, log_det) = chain.solve_with_log_det(0.0)?;
+    let (_, log_det) = chain.fit_with_log_det()?;
     let plan = m.obs_plan(theta);
     let (mut data, mut gauss_cost, mut gauss_log_det) = (0.0, 0.0, 0.0);
     for (((o, x), y), link) in m
