@@ -343,6 +343,17 @@ fn a_gopro_mp4_reads_through_telemetry_parser_and_fits_on_its_gnss_speed() {
     // About 14 m walked in 10.5 s.
     let walked: f64 = signals.distance.iter().sum();
     assert!((8.0..20.0).contains(&walked), "{walked} m");
+    // A camera gyro's bias is a few deg/s at most. Ten seconds with barely a
+    // turn cannot see the segments' roll level: before the segments' level
+    // prior it drifted to -15.6 deg/s (1-sigma 9.9) with no change in the path.
+    for s in gyropath::diagnosis::segment_biases(fit.model(), fit.params()) {
+        assert!(
+            s.bias_dps.iter().all(|b| b.abs() < 3.0),
+            "{:?} deg/s at {} s",
+            s.bias_dps,
+            s.t0
+        );
+    }
 }
 
 /// A camera file cut short or damaged is an error naming it, never a panic

@@ -27,7 +27,7 @@ pub struct GyroBias {
 }
 
 /// Prior standard deviation of the roll and pitch biases about the level guess (rad/s).
-const LEVEL_SIGMA: f64 = 0.3 / DEG_PER_RAD;
+pub(crate) const LEVEL_SIGMA: f64 = 0.3 / DEG_PER_RAD;
 
 impl GyroBias {
     /// Centred on the roll and pitch bias of the start guess.
