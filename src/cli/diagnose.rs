@@ -201,10 +201,15 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
     let strong: Vec<String> = d
         .structure
         .iter()
+        .filter(|c| c.beyond_chance())
         .take(4)
         .map(|c| format!("{} ~ {} r={:+.2}", c.quantity, c.signal, c.r))
         .collect();
-    _ = writeln!(out, "structure {}", strong.join(", "));
+    if strong.is_empty() {
+        _ = writeln!(out, "structure none beyond chance (|r| < 2/sqrt(n))");
+    } else {
+        _ = writeln!(out, "structure {}", strong.join(", "));
+    }
     if let Some(w) = d.whiteness.as_ref().filter(|_| verbose) {
         let parts: Vec<String> = w
             .iter()

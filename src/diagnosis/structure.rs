@@ -20,10 +20,15 @@
 //! increments are white, so only a bias that really moves with the signal
 //! (`b = c T + walk` gives `Delta b = c Delta T + white`) correlates. Time has
 //! constant increments and drops out of the bias comparison.
+//!
+//! An axis whose segment biases barely move (increments under
+//! [`STILL_BIAS_DPS`] RMS) is left out: Pearson's `r` is blind to scale, and
+//! on the comma drive the roll axis, held by its prior and varying by 1e-4
+//! deg/s, "followed" the speed at r = -0.62.
 
 use nalgebra::Vector3;
 
-use super::{fix_residuals, segment_biases};
+use super::{SegmentBias, fix_residuals, segment_biases};
 use crate::model::{Model, Trajectory};
 
 /// One correlation.
@@ -38,11 +43,41 @@ pub struct Correlation {
     pub n: usize,
 }
 
+impl Correlation {
+    /// Whether `|r|` reaches `2 / sqrt(n)`, about where an uncorrelated pair
+    /// of `n` samples lands 5 % of the time: below it the pair says nothing.
+    pub fn beyond_chance(&self) -> bool {
+        self.r.abs() * (self.n as f64).sqrt() >= 2.0
+    }
+}
+
 pub use crate::statistics::pearson;
+
+/// Segment-to-segment bias changes (deg/s, RMS) below which an axis has no
+/// structure to show: 0.001 deg/s moves the heading by 0.005 deg over a 5 s
+/// segment, far under anything a gyro or the fixes resolve.
+pub const STILL_BIAS_DPS: f64 = 1e-3;
 
 /// `x_{k+1} - x_k`.
 fn increments(x: &[f64]) -> Vec<f64> {
     x.windows(2).map(|w| w[1] - w[0]).collect()
+}
+
+/// The segment biases' increments per axis (`bias_x`, ...), leaving out
+/// the axes that stand still (see [`STILL_BIAS_DPS`]).
+fn moving_bias_increments(segs: &[SegmentBias]) -> Vec<(&'static str, Vec<f64>)> {
+    ["bias_x", "bias_y", "bias_z"]
+        .into_iter()
+        .enumerate()
+        .map(|(axis, q)| {
+            let y: Vec<f64> = segs.iter().map(|s| s.bias_dps[axis]).collect();
+            (q, increments(&y))
+        })
+        .filter(|(_, dy)| {
+            let ms = dy.iter().map(|d| d * d).sum::<f64>() / dy.len().max(1) as f64;
+            ms.sqrt() >= STILL_BIAS_DPS
+        })
+        .collect()
 }
 
 /// Per-row motion signals of the fitted path: speed (m/s), turn rate
@@ -133,6 +168,7 @@ pub fn structure(model: &Model, theta: &[f64]) -> Vec<Correlation> {
                 (a.min(sig.len() - 1), b)
             })
             .collect();
+        let bias_increments = moving_bias_increments(&segs);
         // Time advances by the segment length each segment: nothing to compare.
         for (name, values) in signals.iter().filter(|(name, _)| name != "time") {
             let x: Vec<f64> = bounds
@@ -140,14 +176,13 @@ pub fn structure(model: &Model, theta: &[f64]) -> Vec<Correlation> {
                 .map(|&(a, b)| values[a..b].iter().sum::<f64>() / (b - a) as f64)
                 .collect();
             let dx = increments(&x);
-            for (axis, q) in ["bias_x", "bias_y", "bias_z"].iter().enumerate() {
-                let y: Vec<f64> = segs.iter().map(|s| s.bias_dps[axis]).collect();
-                if let Some(r) = pearson(&dx, &increments(&y)) {
+            for (q, dy) in &bias_increments {
+                if let Some(r) = pearson(&dx, dy) {
                     out.push(Correlation {
                         quantity: q.to_string(),
                         signal: name.clone(),
                         r,
-                        n: y.len(),
+                        n: segs.len(),
                     });
                 }
             }
@@ -162,6 +197,43 @@ mod tests {
     use super::*;
     use crate::optimisation::{FitSettings, Reconstruction};
     use std::sync::Arc;
+
+    /// An axis whose biases move by 1e-4 deg/s between segments has nothing
+    /// to correlate; one that moves by 0.01 deg/s has.
+    #[test]
+    fn still_bias_axes_are_left_out() {
+        let segs: Vec<SegmentBias> = (0..6)
+            .map(|k| SegmentBias {
+                t0: 5.0 * k as f64,
+                t1: 5.0 * (k + 1) as f64,
+                bias_dps: [
+                    -0.62 + 1e-4 * (k % 2) as f64,
+                    2.03 + 0.01 * k as f64,
+                    -3.9 + 0.02 * (k % 3) as f64,
+                ],
+            })
+            .collect();
+        let kept: Vec<&str> = moving_bias_increments(&segs)
+            .iter()
+            .map(|(q, _)| *q)
+            .collect();
+        assert_eq!(kept, ["bias_y", "bias_z"]);
+    }
+
+    /// 2 / sqrt(n): r = 0.3 over 60 fixes is beyond chance, over 30 it is not.
+    #[test]
+    fn beyond_chance_scales_with_the_samples() {
+        let c = |r: f64, n: usize| Correlation {
+            quantity: "along".into(),
+            signal: "speed".into(),
+            r,
+            n,
+        };
+        assert!(c(0.3, 60).beyond_chance());
+        assert!(c(-0.3, 60).beyond_chance());
+        assert!(!c(0.3, 30).beyond_chance());
+        assert!(!c(0.09, 60).beyond_chance());
+    }
 
     #[test]
     fn pearson_of_known_series() {
