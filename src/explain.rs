@@ -36,8 +36,9 @@ pub struct Step {
     /// The added effect's estimate per parameter, with its 1-sigma.
     pub estimate: BTreeMap<String, Estimate>,
     /// Held-out error (m) under the ranking's noise: the base model's, or
-    /// the added effect's as the ranking measured it.
-    pub heldout_rms_m: f64,
+    /// the added effect's as the ranking measured it (`None`: the ride
+    /// could not be validated).
+    pub heldout_rms_m: Option<f64>,
     /// `1 - held-out / previous held-out` (0 for the base).
     pub drop: f64,
     /// The ranking's paired t of the gain (0 for the base).
@@ -64,6 +65,9 @@ pub enum Ending {
     NoResult(String),
     /// [`MAX_ADDED`] effects were added.
     StepLimit,
+    /// The ride cannot be validated (too short to withhold anything: the
+    /// reason); the model so far is kept, unjudged.
+    CannotValidate(String),
 }
 
 /// The loop's record: every step, why it ended, and the last diagnosis.
@@ -133,17 +137,32 @@ pub fn explain(
     let progress = |line: &str| observer(Progress::Working(line));
     for _ in 0..MAX_ADDED {
         let started = Instant::now();
-        let diagnosis = diagnose_fitted_against(
+        let diagnosis = match diagnose_fitted_against(
             current.model(),
             current.params(),
             &settings,
             folds,
             reference.map(|(t, m)| (t, m)),
             &progress,
-        )?;
+        ) {
+            Ok(d) => d,
+            // A clip too short to validate still has its path: keep the fit.
+            Err(e @ FitError::TooShortToValidate { .. }) => {
+                if steps.len() == 1 {
+                    observer(Progress::Step(&steps[0]));
+                }
+                let explanation = Explanation {
+                    steps,
+                    ending: Ending::CannotValidate(e.to_string()),
+                    last_diagnosis: None,
+                };
+                return Ok((explanation, current));
+            }
+            Err(e) => return Err(e),
+        };
         if steps.len() == 1 {
             // The base step is told once its held-out error is known.
-            steps[0].heldout_rms_m = diagnosis.heldout_rms_m;
+            steps[0].heldout_rms_m = Some(diagnosis.heldout_rms_m);
             observer(Progress::Step(&steps[0]));
         }
         let Some(top) = diagnosis.ranking.first().filter(|c| c.significant).cloned() else {
@@ -169,7 +188,7 @@ pub fn explain(
         }
         let mut step = step_of(&next, Some(top.effect.clone()), reference, started);
         step.estimate = top.estimate.clone();
-        step.heldout_rms_m = top.heldout_rms_m;
+        step.heldout_rms_m = Some(top.heldout_rms_m);
         step.drop = top.drop;
         step.t_statistic = top.t_statistic;
         observer(Progress::Step(&step));
@@ -197,7 +216,7 @@ fn step_of(
         model: model.effect_ids(),
         added,
         estimate: BTreeMap::new(),
-        heldout_rms_m: f64::NAN,
+        heldout_rms_m: None,
         drop: 0.0,
         t_statistic: 0.0,
         fit_rms_m: fit.stats().rms_horizontal_m,
@@ -213,6 +232,28 @@ fn step_of(
 mod tests {
     use super::*;
 
+    /// Ten seconds make two 5 s blocks, both ends: nothing can be withheld.
+    /// The loop keeps the base fit and says why it could not judge it.
+    #[test]
+    fn a_ride_too_short_to_validate_keeps_its_base_fit() {
+        let sig = Arc::new(crate::testing::simulated_signals(3, 10.0, &[]));
+        let (e, fit) = explain(
+            sig,
+            &FitSettings::default(),
+            &Folds::default(),
+            None,
+            &|_: Progress| {},
+        )
+        .expect("the base fit stands");
+        assert_eq!(e.steps.len(), 1);
+        assert_eq!(e.steps[0].heldout_rms_m, None);
+        let Ending::CannotValidate(why) = &e.ending else {
+            panic!("{:?}", e.ending);
+        };
+        assert!(why.contains("too short to validate"), "{why}");
+        assert!(fit.stats().rms_horizontal_m.is_finite());
+    }
+
     #[test]
     fn a_hidden_gps_lag_is_found_added_and_the_loop_then_stops() {
         let sig = Arc::new(crate::testing::simulated_signals(21, 600.0, &["gps_lag"]));
@@ -225,7 +266,7 @@ mod tests {
         )
         .unwrap();
         assert_eq!(e.steps[0].added, None);
-        assert!(e.steps[0].heldout_rms_m.is_finite());
+        assert!(e.steps[0].heldout_rms_m.is_some_and(f64::is_finite));
         let added: Vec<&str> = e.steps.iter().filter_map(|s| s.added.as_deref()).collect();
         assert_eq!(added.first(), Some(&"gps_lag"), "{added:?}");
         let lag = &e.steps[1].estimate["lag"];

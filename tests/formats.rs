@@ -346,6 +346,21 @@ fn a_gopro_mp4_reads_through_telemetry_parser_and_fits_on_its_gnss_speed() {
     // A camera gyro's bias is a few deg/s at most. Ten seconds with barely a
     // turn cannot see the segments' roll level: before the segments' level
     // prior it drifted to -15.6 deg/s (1-sigma 9.9) with no change in the path.
+    // Ten seconds are two 5 s blocks, both ends, which validation never
+    // withholds: it says so instead of a NaN held-out error.
+    let validated = gyropath::diagnosis::held_out_rms(
+        fit.model(),
+        fit.params(),
+        fit.settings(),
+        &gyropath::diagnosis::Folds::default(),
+    );
+    assert!(
+        matches!(
+            validated,
+            Err(gyropath::optimisation::FitError::TooShortToValidate { found: 0, .. })
+        ),
+        "{validated:?}"
+    );
     for s in gyropath::diagnosis::segment_biases(fit.model(), fit.params()) {
         assert!(
             s.bias_dps.iter().all(|b| b.abs() < 3.0),

@@ -62,7 +62,10 @@ impl GyropathApp {
                                     .on_hover_text(format!(
                                         "{jumps} fixes more than 5 times the median misfit (at least 10 m) from this model's fitted path are GPS jumps, left out of its held-out RMS"
                                     )),
-                                None => ui.label("validating..."),
+                                None => match &row.held_out_failed {
+                                    Some(why) => ui.label("-").on_hover_text(why),
+                                    None => ui.label("validating..."),
+                                },
                             };
                             if with_reference {
                                 ui.label(

@@ -124,6 +124,9 @@ pub struct HistoryRow {
     /// were left out), filled in by a background validation of this fit as
     /// it is (its own noise settings).
     pub held_out: Option<HeldOutRms>,
+    /// Why this fit could not be validated (a ride too short to withhold
+    /// anything), shown in place of a held-out error.
+    pub held_out_failed: Option<String>,
     pub iterations: usize,
     /// Horizontal RMS distance from the reference track (m), when one is loaded.
     pub reference_rms_m: Option<f64>,
@@ -325,9 +328,12 @@ impl GyropathApp {
                         .iter_mut()
                         .rev()
                         .find(|r| r.model == model && r.params == params)
-                        .filter(|r| r.held_out.is_none())
+                        .filter(|r| r.held_out.is_none() && r.held_out_failed.is_none())
                     {
-                        row.held_out = Some(held_out);
+                        match held_out {
+                            Ok(h) => row.held_out = Some(h),
+                            Err(why) => row.held_out_failed = Some(why),
+                        }
                     }
                 }
             }
@@ -359,6 +365,7 @@ impl GyropathApp {
             fit_rms_m: s.stats.rms_horizontal_m,
             gps_noise: s.gps_noise.clone(),
             held_out: None,
+            held_out_failed: None,
             iterations: s.history.len(),
             reference_rms_m: s.reference.as_ref().map(|c| c.horizontal.rms_m),
         };

@@ -202,11 +202,12 @@ pub enum Update {
     Diagnosis(Box<Diagnosis>),
     /// A reference track was read and matched to the ride.
     ReferenceLoaded(Box<ReferenceView>),
-    /// Held-out error of a finished fit, for the model history.
+    /// Held-out error of a finished fit, for the model history, or why
+    /// there is none.
     HeldOut {
         model: String,
         params: usize,
-        held_out: HeldOutRms,
+        held_out: Result<HeldOutRms, String>,
     },
 }
 
@@ -520,9 +521,8 @@ impl Worker {
         let tx = self.tx.clone();
         let wake = self.wake_handle();
         std::thread::spawn(move || {
-            let Ok(held_out) = held_out_rms(&model, &theta, &settings, &Folds::default()) else {
-                return;
-            };
+            let held_out = held_out_rms(&model, &theta, &settings, &Folds::default())
+                .map_err(|e| e.to_string());
             let _ = tx.send(Update::HeldOut {
                 model: model.effect_ids().join(", "),
                 params: model.n_params(),

@@ -45,19 +45,20 @@ fn step_line(s: &Step) -> String {
     let reference = s.reference.as_ref().map_or(String::new(), |c| {
         format!("; to the reference {:.2} m", c.horizontal.rms_m)
     });
+    let held_out = s
+        .heldout_rms_m
+        .map_or("not validated".into(), |h| format!("held-out {h:.3} m"));
     match &s.added {
         None => format!(
-            "base      {}: held-out {:.3} m; path to the fixes {:.3} m{reference} ({:.1} s)",
+            "base      {}: {held_out}; path to the fixes {:.3} m{reference} ({:.1} s)",
             s.model.join(", "),
-            s.heldout_rms_m,
             s.fit_rms_m,
             s.elapsed_s
         ),
         Some(effect) => {
             format!(
-                "added     {effect} ({}): held-out {:.3} m, {:.1} % lower (t {:.1}); path to the fixes {:.3} m{reference} ({:.1} s)",
+                "added     {effect} ({}): {held_out}, {:.1} % lower (t {:.1}); path to the fixes {:.3} m{reference} ({:.1} s)",
                 describe_estimates(&s.estimate),
-                s.heldout_rms_m,
                 100.0 * s.drop,
                 s.t_statistic,
                 s.fit_rms_m,
@@ -182,6 +183,10 @@ fn ending_line(e: &Explanation, fit: &Reconstruction) -> String {
             format!("answer    {model}; the next fit was no result:\n{reason}")
         }
         Ending::StepLimit => format!("answer    {model}: stopped after {} effects", added.len()),
+        Ending::CannotValidate(reason) => format!(
+            "answer    {model}, not validated (path {:.3} m from the fixes):\n{reason}",
+            fit.stats().rms_horizontal_m
+        ),
     }
 }
 

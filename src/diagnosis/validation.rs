@@ -332,6 +332,42 @@ struct FoldResult {
     params: Vec<f64>,
 }
 
+/// Interior blocks with a fix that validation needs: with fewer, the
+/// held-out error is an average over one stretch (or none: a 10 s clip made
+/// two 5 s end blocks, nothing was withheld, and `diagnose` printed a NaN
+/// held-out error and "nothing missing").
+pub const MIN_WITHHELD_BLOCKS: usize = 2;
+
+/// Refuse a ride whose interior blocks (see [`Folds::fold_of_block`]) hold
+/// fewer than [`MIN_WITHHELD_BLOCKS`] with a fix, saying how long a ride
+/// would do (`MIN_WITHHELD_BLOCKS + 2` blocks of the shortest length, 5 s).
+fn check_withheld_blocks(
+    sig: &crate::signals::Signals,
+    folds: &Folds,
+    last: usize,
+) -> Result<(), FitError> {
+    let t0 = sig.t[0];
+    let mut withheld: Vec<usize> = sig
+        .fixes
+        .iter()
+        .map(|f| folds.block(f.t, t0))
+        .filter(|&b| folds.fold_of_block(b, last).is_some())
+        .collect();
+    withheld.dedup();
+    if withheld.len() >= MIN_WITHHELD_BLOCKS {
+        return Ok(());
+    }
+    Err(FitError::TooShortToValidate {
+        file: sig.source.clone(),
+        duration_s: sig.duration(),
+        blocks: last + 1,
+        block_s: folds.block_s,
+        found: withheld.len(),
+        needed: MIN_WITHHELD_BLOCKS,
+        min_duration_s: (MIN_WITHHELD_BLOCKS + 2) as f64 * 5.0,
+    })
+}
+
 /// Held-out errors of `model` fitted at `theta` (the full-data fit), refitting
 /// each fold in parallel.
 pub fn held_out(
@@ -347,6 +383,7 @@ pub fn held_out(
     let last = folds.block(t0 + sig.duration(), t0);
     let fold_at = |t: f64| folds.fold_of_block(folds.block(t, t0), last);
     let fold_of: Vec<Option<usize>> = sig.fixes.iter().map(|f| fold_at(f.t)).collect();
+    check_withheld_blocks(sig, folds, last)?;
     let long = sig.len() > SEQUENTIAL_FOLDS_ROWS;
     // Every fold's refit starts at `theta`, where the path's derivatives are
     // the full ride's: one linearisation of it serves each fold's first

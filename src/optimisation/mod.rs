@@ -53,6 +53,18 @@ pub enum FitError {
         rows: usize,
         params: usize,
     },
+    #[error(
+        "{file}: too short to validate a model: its {duration_s:.1} s make {blocks} blocks of {block_s:.1} s, and held-out validation withholds the blocks between the first and the last (which every refit keeps) and needs at least {needed} of them with GPS fixes ({found} here); a ride of {min_duration_s:.0} s or more"
+    )]
+    TooShortToValidate {
+        file: String,
+        duration_s: f64,
+        blocks: usize,
+        block_s: f64,
+        found: usize,
+        needed: usize,
+        min_duration_s: f64,
+    },
 }
 
 /// Step-2 optimiser.

@@ -94,7 +94,7 @@ impl ModelRow {
                 },
                 fit_rms_m: s.fit_rms_m,
                 gps_noise: s.gps_noise.clone(),
-                heldout_rms_m: Some(s.heldout_rms_m),
+                heldout_rms_m: s.heldout_rms_m,
                 reference_rms_m: s.reference.as_ref().map(|r| r.horizontal.rms_m),
             })
             .collect()
@@ -357,6 +357,7 @@ pub fn page(c: &Contents) -> Page {
             }
             Ending::NoResult(reason) => format!("The next fit was no result: {reason}"),
             Ending::StepLimit => "Stopped at the limit of added effects.".into(),
+            Ending::CannotValidate(reason) => format!("Not validated: {reason}"),
         }),
         diagnosis_under: c.diagnosis.map(|d| {
             format!(

@@ -104,6 +104,7 @@ mod tests {
                 rms_m,
                 jumps_left_out: 0,
             }),
+            held_out_failed: None,
             iterations: 9,
             reference_rms_m: None,
         };
