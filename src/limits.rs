@@ -14,6 +14,7 @@
 //! | start tilt of the sensor | 30 deg | a sensor is mounted near upright (the fit's own prior is 10 deg); more means the vertical axis is not z, or the roll and pitch rates do not describe the vehicle |
 //! | mounting misalignment | 20 deg | a bracket is a few degrees off; 90 or 180 is a swapped or flipped axis |
 //! | gyro scale error | 20 % | MEMS scale errors are a few percent; 57x or 1/57 is rad/s against deg/s |
+//! | barometer drift (diagnosis only) | 50 m/h | the weather moves the pressure by at most a few hPa an hour (a strong front 3 hPa, 25 m); hundreds of m/h is a vertical misfit of something else (on 30 s simulated rides whose barometers drift 1-4 m/h, `baro_drift` read 184-528 m/h) |
 //!
 //! The measurements and the history behind these choices: docs/vehicles.md
 //! (physical limits, measured on real drives).
@@ -26,6 +27,7 @@ pub const GAIN_RANGE: (f64, f64) = (0.7, 1.3);
 pub const MAX_START_TILT_DEG: f64 = 30.0;
 pub const MAX_MOUNT_DEG: f64 = 20.0;
 pub const MAX_SCALE_PERCENT: f64 = 20.0;
+pub const MAX_BARO_DRIFT_M_PER_H: f64 = 50.0;
 
 /// A fitted quantity beyond its physical limit, and what probably caused it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]

@@ -98,6 +98,51 @@ pub fn track_scatter_m(t: &[f64], en: &[[f64; 2]]) -> Option<f64> {
     (distances.len() >= 5).then(|| median(&mut distances))
 }
 
+/// Student's t distribution function `P(T <= t)` for `dof` (>= 1) degrees
+/// of freedom, in closed form for whole degrees of freedom (Abramowitz and
+/// Stegun 26.7.3-4): with `theta = atan(t / sqrt(dof))`,
+/// `P(|T| <= t) = 2/pi (theta + sin theta (cos theta + 2/3 cos^3 theta + ...))`
+/// for odd `dof` (the sum running to `cos^(dof-2)`, empty for 1) and
+/// `sin theta (1 + 1/2 cos^2 theta + 1*3/(2*4) cos^4 theta + ...)` for even.
+pub fn student_t_cdf(t: f64, dof: usize) -> f64 {
+    let dof = dof.max(1);
+    let theta = (t.abs() / (dof as f64).sqrt()).atan();
+    let (s, c) = theta.sin_cos();
+    let c2 = c * c;
+    let within = if dof % 2 == 1 {
+        let (mut term, mut sum) = (c, 0.0);
+        for k in (1..dof.saturating_sub(1)).step_by(2) {
+            sum += term;
+            term *= c2 * (k + 1) as f64 / (k + 2) as f64;
+        }
+        std::f64::consts::FRAC_2_PI * (theta + s * sum)
+    } else {
+        let (mut term, mut sum) = (1.0, 0.0);
+        for k in (0..dof - 1).step_by(2) {
+            sum += term;
+            term *= c2 * (k + 1) as f64 / (k + 2) as f64;
+        }
+        s * sum
+    };
+    let upper = 0.5 * (1.0 - within.clamp(0.0, 1.0));
+    if t >= 0.0 { 1.0 - upper } else { upper }
+}
+
+/// The `p` quantile (0.5 <= p < 1) of Student's t with `dof` degrees of
+/// freedom, by bisection of [`student_t_cdf`].
+pub fn student_t_quantile(p: f64, dof: usize) -> f64 {
+    let (mut lo, mut hi) = (0.0, 1e6);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if student_t_cdf(mid, dof) < p {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
 /// Pearson correlation of two equally long series (`None` if either is constant).
 pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
     let n = x.len().min(y.len());
@@ -119,6 +164,18 @@ pub fn pearson(x: &[f64], y: &[f64]) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Textbook quantiles: t(0.975) for 1, 2, 3, 9 and 30 degrees of freedom,
+    /// and the distribution function's symmetry.
+    #[test]
+    fn student_t_matches_its_tables() {
+        for (dof, q) in [(1, 12.706), (2, 4.303), (3, 3.182), (9, 2.262), (30, 2.042)] {
+            let got = student_t_quantile(0.975, dof);
+            assert!((got - q).abs() < 2e-3, "{dof}: {got}");
+        }
+        assert!((student_t_cdf(-1.3, 4) + student_t_cdf(1.3, 4) - 1.0).abs() < 1e-12);
+        assert!((student_t_cdf(0.0, 7) - 0.5).abs() < 1e-12);
+    }
 
     #[test]
     fn median_of_odd_and_even_counts_and_of_none() {

@@ -3,7 +3,7 @@
 //! wrong, never a missing effect.
 
 use super::Estimate;
-use crate::limits::{MAX_MOUNT_DEG, MAX_SCALE_PERCENT};
+use crate::limits::{MAX_BARO_DRIFT_M_PER_H, MAX_MOUNT_DEG, MAX_SCALE_PERCENT};
 
 /// Why a diagnosis estimate is physically absurd, if it is: then it cannot be
 /// a missing effect, and the axes or units are the likelier fault.
@@ -24,6 +24,11 @@ pub fn absurd_estimate(effect: &str, estimate: &[(&String, &Estimate)]) -> Optio
         "gyro_scale" => worst("scale_error").filter(|w| w.1 > MAX_SCALE_PERCENT).map(|(k, v)| {
             format!(
                 "{k} of {v:.0} % is no MEMS scale error (limit {MAX_SCALE_PERCENT:.0} %): the gyro's units look wrong (rad/s against deg/s is 5,700 %); see `gyropath check`"
+            )
+        }),
+        "baro_drift" => worst("drift").filter(|w| w.1 > MAX_BARO_DRIFT_M_PER_H).map(|(k, v)| {
+            format!(
+                "{k} of {v:.0} m/h is no weather's (limit {MAX_BARO_DRIFT_M_PER_H:.0} m/h): the path and the barometer part for another reason"
             )
         }),
         _ => None,
@@ -59,5 +64,12 @@ mod tests {
         );
         assert!(absurd_estimate("gyro_scale", &[(&z, &e(3.0))]).is_none());
         assert!(absurd_estimate("gps_lag", &[(&z, &e(400.0))]).is_none());
+        let drift = "drift".to_string();
+        assert!(absurd_estimate("baro_drift", &[(&drift, &e(3.0))]).is_none());
+        assert!(
+            absurd_estimate("baro_drift", &[(&drift, &e(-184.0))])
+                .unwrap()
+                .contains("184 m/h")
+        );
     }
 }
