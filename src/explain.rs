@@ -232,19 +232,24 @@ fn step_of(
 mod tests {
     use super::*;
 
-    /// Ten seconds make two 5 s blocks, both ends: nothing can be withheld.
-    /// The loop keeps the base fit and says why it could not judge it.
-    #[test]
-    fn a_ride_too_short_to_validate_keeps_its_base_fit() {
-        let sig = Arc::new(crate::testing::simulated_signals(3, 10.0, &[]));
-        let (e, fit) = explain(
+    /// The loop with the defaults on a simulated ride.
+    fn explained(seed: u64, duration_s: f64, hidden: &[&str]) -> (Explanation, Reconstruction) {
+        let sig = Arc::new(crate::testing::simulated_signals(seed, duration_s, hidden));
+        explain(
             sig,
             &FitSettings::default(),
             &Folds::default(),
             None,
             &|_: Progress| {},
         )
-        .expect("the base fit stands");
+        .expect("the base fit stands")
+    }
+
+    /// Ten seconds make two 5 s blocks, both ends: nothing can be withheld.
+    /// The loop keeps the base fit and says why it could not judge it.
+    #[test]
+    fn a_ride_too_short_to_validate_keeps_its_base_fit() {
+        let (e, fit) = explained(3, 10.0, &[]);
         assert_eq!(e.steps.len(), 1);
         assert_eq!(e.steps[0].heldout_rms_m, None);
         let Ending::CannotValidate(why) = &e.ending else {
@@ -256,15 +261,7 @@ mod tests {
 
     #[test]
     fn a_hidden_gps_lag_is_found_added_and_the_loop_then_stops() {
-        let sig = Arc::new(crate::testing::simulated_signals(21, 600.0, &["gps_lag"]));
-        let (e, fit) = explain(
-            sig,
-            &FitSettings::default(),
-            &Folds::default(),
-            None,
-            &|_: Progress| {},
-        )
-        .unwrap();
+        let (e, fit) = explained(21, 600.0, &["gps_lag"]);
         assert_eq!(e.steps[0].added, None);
         assert!(e.steps[0].heldout_rms_m.is_some_and(f64::is_finite));
         let added: Vec<&str> = e.steps.iter().filter_map(|s| s.added.as_deref()).collect();

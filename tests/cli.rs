@@ -1286,3 +1286,48 @@ fn gpx_and_nmea_references_are_put_on_the_rides_clock() {
         "{err}"
     );
 }
+
+/// A 10 s ride cannot be validated: `diagnose` fails naming the file and
+/// why (it printed a NaN held-out error and "nothing missing"), and
+/// `explain` keeps the base fit, writes its path and says it is not
+/// validated.
+#[test]
+fn a_ride_too_short_to_validate_is_told_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("short.csv");
+    let truth = dir.path().join("truth.csv");
+    let out = gyropath(&[
+        "simulate",
+        "--seed",
+        "3",
+        "--duration",
+        "10",
+        "--out",
+        s(&ride),
+        "--truth",
+        s(&truth),
+    ]);
+    assert!(out.status.success());
+    let out = gyropath(&["diagnose", s(&ride)]);
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(!out.status.success(), "{stdout}");
+    assert!(
+        stderr.contains("short.csv") && stderr.contains("too short to validate"),
+        "{stderr}"
+    );
+    assert!(!stdout.contains("NaN") && !stdout.contains("nothing missing"));
+    let path = dir.path().join("path.csv");
+    let out = gyropath(&["explain", s(&ride), "--out", s(&path)]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("not validated"), "{stdout}");
+    assert!(!stdout.contains("NaN"), "{stdout}");
+    assert!(path.exists());
+}

@@ -95,9 +95,7 @@ impl GyroBiasSegments {
     pub fn segment_of(&self, j: usize) -> usize {
         self.segment_of[j] as usize
     }
-}
 
-impl GyroBiasSegments {
     /// How many segments (from the first) carry a level row on roll and
     /// pitch: the first under a walk, all without one, none when planar.
     fn level_segments(&self) -> usize {
