@@ -68,7 +68,7 @@ impl Folds {
     pub fn for_ride(&self, duration_s: f64) -> Folds {
         let k = self.k.max(2);
         let fit = duration_s / (2 * k + 2) as f64;
-        let wanted = self.block_s.min(fit).max(5.0);
+        let wanted = self.block_s.min(fit).max(MIN_BLOCK_S);
         let blocks = (duration_s / wanted).round().max(1.0);
         Folds {
             // The last fix, at exactly `duration_s`, falls inside the last block.
@@ -99,6 +99,10 @@ impl Folds {
         })
     }
 }
+
+/// The shortest validation block (s): [`Folds::for_ride`] shortens blocks
+/// no further on short rides.
+pub const MIN_BLOCK_S: f64 = 5.0;
 
 /// Held-out errors of every fix.
 #[derive(Clone, Debug, PartialEq)]
@@ -338,20 +342,23 @@ struct FoldResult {
 /// held-out error and "nothing missing").
 pub const MIN_WITHHELD_BLOCKS: usize = 2;
 
-/// Refuse a ride whose interior blocks (see [`Folds::fold_of_block`]) hold
-/// fewer than [`MIN_WITHHELD_BLOCKS`] with a fix, saying how long a ride
-/// would do (`MIN_WITHHELD_BLOCKS + 2` blocks of the shortest length, 5 s).
+/// Refuse a ride whose interior blocks hold fewer than
+/// [`MIN_WITHHELD_BLOCKS`] with a fix (`fold_of`: each fix's fold, `None`
+/// in the end blocks), saying how long a ride would do
+/// (`MIN_WITHHELD_BLOCKS + 2` blocks of [`MIN_BLOCK_S`]).
 fn check_withheld_blocks(
     sig: &crate::signals::Signals,
     folds: &Folds,
     last: usize,
+    fold_of: &[Option<usize>],
 ) -> Result<(), FitError> {
     let t0 = sig.t[0];
     let mut withheld: Vec<usize> = sig
         .fixes
         .iter()
-        .map(|f| folds.block(f.t, t0))
-        .filter(|&b| folds.fold_of_block(b, last).is_some())
+        .zip(fold_of)
+        .filter(|(_, fold)| fold.is_some())
+        .map(|(f, _)| folds.block(f.t, t0))
         .collect();
     withheld.dedup();
     if withheld.len() >= MIN_WITHHELD_BLOCKS {
@@ -364,7 +371,7 @@ fn check_withheld_blocks(
         block_s: folds.block_s,
         found: withheld.len(),
         needed: MIN_WITHHELD_BLOCKS,
-        min_duration_s: (MIN_WITHHELD_BLOCKS + 2) as f64 * 5.0,
+        min_duration_s: (MIN_WITHHELD_BLOCKS + 2) as f64 * MIN_BLOCK_S,
     })
 }
 
@@ -383,7 +390,7 @@ pub fn held_out(
     let last = folds.block(t0 + sig.duration(), t0);
     let fold_at = |t: f64| folds.fold_of_block(folds.block(t, t0), last);
     let fold_of: Vec<Option<usize>> = sig.fixes.iter().map(|f| fold_at(f.t)).collect();
-    check_withheld_blocks(sig, folds, last)?;
+    check_withheld_blocks(sig, folds, last, &fold_of)?;
     let long = sig.len() > SEQUENTIAL_FOLDS_ROWS;
     // Every fold's refit starts at `theta`, where the path's derivatives are
     // the full ride's: one linearisation of it serves each fold's first
