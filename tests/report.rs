@@ -256,6 +256,33 @@ fn an_explain_report_holds_every_step_and_the_last_ranking() {
     }
 }
 
+/// A real planar ride (the Husky robot's ROS 2 bag: heading only, no GPS
+/// outage) is told in words and numbers, never as "NaN" or "-0": the
+/// ranking once explained its yaw-only gyro scale as "(x NaN %, y NaN %)"
+/// and the ride's outages as "0 outages ... covering -0 s".
+#[test]
+fn a_planar_real_ride_is_reported_without_nan_or_negative_zero() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let page = dir.path().join("husky.html");
+    let out = gyropath(&[
+        "explain",
+        "../shared/real/robot_localization-test1/test1_ros2",
+        "--html",
+        page.to_str().unwrap(),
+        "--quiet",
+    ]);
+    ok(&out);
+    let html = std::fs::read_to_string(&page).expect("report written");
+    assert!(html.contains("planar, heading only"), "a planar fit");
+    assert!(html.contains("no outage longer than"), "the ride's outages");
+    assert!(
+        html.contains("the yaw gyro reads"),
+        "the scale's explanation"
+    );
+    assert!(!html.contains("NaN"), "a NaN in the report");
+    assert!(!html.contains("covering -0"), "a negative zero");
+}
+
 #[test]
 fn a_batch_writes_a_report_per_ride_and_an_index_linking_them() {
     let dir = tempfile::tempdir().expect("temp dir");

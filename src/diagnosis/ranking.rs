@@ -639,19 +639,31 @@ fn explain(
         "gyro_scale" => {
             let z = v("scale_error_z");
             format!(
-                "the yaw gyro reads {:.2} % {} (x {:.2} %, y {:.2} %): turns come out {}, so the cross-track residual grows with each heading change",
+                "the yaw gyro reads {:.2} % {}{}: turns come out {}, so the cross-track residual grows with each heading change",
                 z.abs(),
                 if z > 0.0 { "high" } else { "low" },
-                v("scale_error_x"),
-                v("scale_error_y"),
+                other_axes(est, "scale_error_", 2, " %"),
                 if z > 0.0 { "too sharp" } else { "too wide" }
             )
         }
-        "mount_misalignment" => format!(
-            "the sensor is mounted askew: the vehicle's forward axis is {:.2} deg off in yaw and {:.2} deg in pitch in sensor axes, so the path drifts sideways and vertically as the vehicle leans and climbs",
-            v("forward_yaw"),
-            v("forward_pitch")
-        ),
+        "mount_misalignment" => {
+            let angles: Vec<String> = [("forward_yaw", "yaw"), ("forward_pitch", "pitch")]
+                .iter()
+                .filter_map(|&(name, axis)| {
+                    let e = est.get(name).filter(|e| e.determined)?;
+                    Some(format!("{:.2} deg in {axis}", e.value))
+                })
+                .collect();
+            if angles.is_empty() {
+                "the sensor may be mounted askew, but this ride determines neither angle"
+                    .to_string()
+            } else {
+                format!(
+                    "the sensor is mounted askew: the vehicle's forward axis is off by {} in sensor axes, so the path drifts sideways and vertically as the vehicle leans and climbs",
+                    angles.join(" and ")
+                )
+            }
+        }
         "baro_drift" => format!(
             "the barometer drifts {:.2} m/h (weather): the vertical residual grows linearly in time",
             v("drift")
@@ -669,19 +681,54 @@ fn explain(
         channel if channel.starts_with(effects::CHANNEL_PREFIX) => {
             let c = &channel[effects::CHANNEL_PREFIX.len()..];
             format!(
-                "the gyro bias moves with {c}: {:.4} deg/s per unit on z (x {:.4}, y {:.4}), so the fitted segment bias tracks {c}",
+                "the gyro bias moves with {c}: {:.4} deg/s per unit on z{}, so the fitted segment bias tracks {c}",
                 v("slope_z"),
-                v("slope_x"),
-                v("slope_y")
+                other_axes(est, "slope_", 4, "")
             )
         }
         other => format!("{other} lowers the held-out error"),
     }
 }
 
+/// " (x 0.12 %, y -0.03 %)": the roll and pitch axes' estimates of a
+/// per-axis parameter `{prefix}x`, `{prefix}y` beside the yaw axis's, or
+/// nothing when the fit left them out (a planar ride estimates yaw only).
+fn other_axes(est: &BTreeMap<String, Estimate>, prefix: &str, digits: usize, unit: &str) -> String {
+    let axes: Vec<String> = ["x", "y"]
+        .iter()
+        .filter_map(|a| {
+            let e = est.get(&format!("{prefix}{a}"))?;
+            Some(format!("{a} {:.digits$}{unit}", e.value))
+        })
+        .collect();
+    if axes.is_empty() {
+        String::new()
+    } else {
+        format!(" ({})", axes.join(", "))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_other_axes_are_named_only_where_the_fit_estimated_them() {
+        let estimate = |value| Estimate {
+            value,
+            sigma: 0.1,
+            unit: "%".into(),
+            determined: true,
+        };
+        let mut est = BTreeMap::from([("scale_error_z".to_string(), estimate(2.0))]);
+        assert_eq!(other_axes(&est, "scale_error_", 2, " %"), "");
+        est.insert("scale_error_x".into(), estimate(0.123));
+        est.insert("scale_error_y".into(), estimate(-0.03));
+        assert_eq!(
+            other_axes(&est, "scale_error_", 2, " %"),
+            " (x 0.12 %, y -0.03 %)"
+        );
+    }
 
     #[test]
     fn the_thresholds_rise_on_rides_with_few_blocks() {

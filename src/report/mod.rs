@@ -454,17 +454,29 @@ fn ride_items(c: &Contents, r: &FitReport) -> Vec<Item> {
         item(
             "GPS fixes",
             format!(
-                "{} ({:.2} Hz), {} outages longer than {} s covering {:.0} s",
+                "{} ({:.2} Hz), {}",
                 r.gps_fixes,
                 r.gps_fixes as f64 / duration,
-                outages.len(),
-                crate::diagnosis::view::OUTAGE_S,
-                outages.iter().map(|(a, b)| b - a).sum::<f64>()
+                outage_summary(&outages)
             ),
         ),
         item("attitude", &r.attitude),
     ]);
     items
+}
+
+/// "no outage longer than 2.5 s", or how many there are and the time they
+/// cover (never "-0 s": an empty `f64` sum is `-0.0`).
+fn outage_summary(outages: &[(f64, f64)]) -> String {
+    let limit = crate::diagnosis::view::OUTAGE_S;
+    if outages.is_empty() {
+        return format!("no outage longer than {limit} s");
+    }
+    format!(
+        "{} outage(s) longer than {limit} s covering {:.0} s",
+        outages.len(),
+        outages.iter().map(|(a, b)| b - a).sum::<f64>()
+    )
 }
 
 fn result_items(r: &FitReport) -> Vec<Item> {
