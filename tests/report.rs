@@ -283,6 +283,24 @@ fn a_planar_real_ride_is_reported_without_nan_or_negative_zero() {
     assert!(!html.contains("covering -0"), "a negative zero");
 }
 
+/// A check's warning is shown once, in the checks' table (the Berlin drive's
+/// GPS altitude jumps by 62 m; its report once repeated that under the table).
+#[test]
+fn a_checks_warning_is_shown_once() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    let page = dir.path().join("berlin.html");
+    let out = gyropath(&[
+        "fit",
+        "../shared/real/smartloc-berlin-potsdamer-platz/ride.csv",
+        "--html",
+        page.to_str().unwrap(),
+        "--quiet",
+    ]);
+    ok(&out);
+    let html = std::fs::read_to_string(&page).expect("report written");
+    assert_eq!(html.matches("jumps by 62 m at t = 70.1 s").count(), 1);
+}
+
 #[test]
 fn a_batch_writes_a_report_per_ride_and_an_index_linking_them() {
     let dir = tempfile::tempdir().expect("temp dir");

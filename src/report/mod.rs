@@ -309,7 +309,20 @@ pub fn page(c: &Contents) -> Page {
                 })
                 .collect()
         }),
-        warnings: report.warnings.clone(),
+        // The checks' warnings reach the fit's warnings too (the terminal
+        // prints them); the page shows each once, in the checks' table.
+        warnings: report
+            .warnings
+            .iter()
+            .filter(|w| {
+                !c.origin.is_some_and(|o| {
+                    o.verdicts
+                        .iter()
+                        .any(|v| **w == format!("{}: {}", v.subject, v.message))
+                })
+            })
+            .cloned()
+            .collect(),
         result: result_items(report),
         params: param_rows(report),
         reference: report.reference.as_ref().map_or(Vec::new(), |r| {
