@@ -609,6 +609,60 @@ fn a_batchs_outputs_never_collide_and_without_out_dir_it_writes_nothing() {
     assert_eq!(std::fs::read_dir(&work).unwrap().count(), 0);
 }
 
+/// A folder of drives, one folder each with its ride and reference (as
+/// `../shared/real` is laid out): the batch finds the rides in the
+/// subfolders and measures each against the `truth.csv` beside it, which is
+/// not taken for a ride; without `--reference` that file fails as what it is.
+#[test]
+fn a_batch_searches_subfolders_and_a_reference_beside_a_ride_is_not_a_ride() {
+    let dir = tempfile::tempdir().unwrap();
+    let drives = dir.path().join("drives");
+    for (folder, seed) in [("a", "61"), ("b/deeper", "62")] {
+        let here = drives.join(folder);
+        std::fs::create_dir_all(&here).unwrap();
+        let out = gyropath(&[
+            "simulate",
+            "--seed",
+            seed,
+            "--duration",
+            "120",
+            "--out",
+            s(&here.join("ride.csv")),
+            "--truth",
+            s(&here.join("truth.csv")),
+        ]);
+        assert!(out.status.success());
+    }
+    let out_dir = dir.path().join("out");
+    let out = gyropath(&[
+        "fit",
+        s(&drives),
+        "--reference",
+        "truth.csv",
+        "--out-dir",
+        s(&out_dir),
+        "--quiet",
+    ]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{table}");
+    assert!(table.contains("2 rides, 2 fitted, 0 failed"), "{table}");
+    for stem in ["a-ride", "deeper-ride"] {
+        let report = out_dir.join(format!("{stem}-report.json"));
+        let r: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let to_ref = r["reference"]["horizontal"]["rms_m"].as_f64();
+        assert!(to_ref.is_some_and(|m| m < 5.0), "{stem}: {to_ref:?}");
+    }
+    let out = gyropath(&["fit", s(&drives), "--quiet"]);
+    let table = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(1), "{table}");
+    assert!(table.contains("4 rides, 2 fitted, 2 failed"), "{table}");
+    assert!(
+        table.contains("a track of positions without a gyro"),
+        "{table}"
+    );
+}
+
 #[test]
 fn dash_is_standard_output_the_format_follows_the_extension_and_devices_stay_devices() {
     let dir = tempfile::tempdir().unwrap();

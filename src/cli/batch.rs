@@ -11,33 +11,72 @@ struct BatchRow {
     outcome: Result<FitReport, String>,
 }
 
-/// The file types a folder of rides is searched for.
-/// Every ride log, bag, ULog, DataFlash, camera and GnssLogger log in the given files and folders,
-/// and every rosbag2 folder or comma2k19 segment directly inside them (each
-/// one ride; folders not recursed further), sorted.
-fn collect_rides(inputs: &[PathBuf]) -> Result<Vec<PathBuf>> {
+/// How deep [`collect_rides`] looks into a folder's subfolders.
+const MAX_FOLDER_DEPTH: usize = 8;
+
+/// Every ride log, bag, ULog, DataFlash, camera and GnssLogger log in the
+/// given files and folders, sorted; folders are searched through their
+/// subfolders (a folder per drive, as `../shared/real` holds them), a rosbag2
+/// folder or comma2k19 segment being one ride. Hidden and symlinked folders
+/// are not entered, and a file that is the batch's reference track (`truth.csv`
+/// beside a ride for `--reference truth.csv`) is not a ride.
+fn collect_rides(inputs: &[PathBuf], reference: Option<&Path>) -> Result<Vec<PathBuf>> {
     let mut rides = Vec::new();
     for input in inputs {
         if input.is_dir() && !gyropath::import::is_ride_folder(input) {
-            let mut found: Vec<PathBuf> = std::fs::read_dir(input)
-                .with_context(|| format!("cannot list {}", input.display()))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| {
-                    gyropath::import::is_ride_folder(p) || gyropath::import::is_ride_file(p)
-                })
-                .collect();
-            found.sort();
-            rides.extend(found);
+            rides_in(input, reference, 0, &mut rides)?;
         } else {
             rides.push(input.clone());
         }
     }
     if rides.is_empty() {
         anyhow::bail!(
-            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.bin, *.mp4, *.mov, GnssLogger *.txt, rosbag2 folders, comma2k19 segments) found in the given folders"
+            "no rides (*.csv, *.bag, *.mcap, *.ulg, *.bin, *.mp4, *.mov, GnssLogger *.txt, rosbag2 folders, comma2k19 segments) found in the given folders or their subfolders"
         );
     }
     Ok(rides)
+}
+
+/// The rides in `dir` and its subfolders, in sorted order (see [`collect_rides`]).
+fn rides_in(
+    dir: &Path,
+    reference: Option<&Path>,
+    depth: usize,
+    rides: &mut Vec<PathBuf>,
+) -> Result<()> {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .collect();
+    entries.sort();
+    for path in entries {
+        let hidden = path
+            .file_name()
+            .is_some_and(|n| n.to_string_lossy().starts_with('.'));
+        if hidden {
+            continue;
+        }
+        if gyropath::import::is_ride_folder(&path) {
+            rides.push(path);
+        } else if path.is_dir() {
+            let linked = path.symlink_metadata().is_ok_and(|m| m.is_symlink());
+            if !linked && depth < MAX_FOLDER_DEPTH {
+                rides_in(&path, reference, depth + 1, rides)?;
+            }
+        } else if gyropath::import::is_ride_file(&path) && !is_reference(&path, reference) {
+            rides.push(path);
+        }
+    }
+    Ok(())
+}
+
+/// Whether `file` is the reference track [`reference_for`] gives a ride beside it.
+fn is_reference(file: &Path, reference: Option<&Path>) -> bool {
+    let same = |a: &Path, b: &Path| match (a.canonicalize(), b.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    reference_for(file, reference).is_some_and(|r| same(&r, file))
 }
 
 /// The names of a batch's outputs, one per ride: the ride's file stem, with
@@ -167,7 +206,7 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     }
     let settings = args.settings_with_model()?;
-    let rides = collect_rides(&args.rides)?;
+    let rides = collect_rides(&args.rides, args.reference.as_deref())?;
     let stems = output_stems(&rides)?;
     let started = Instant::now();
     let rows: Vec<BatchRow> = rides
@@ -196,8 +235,15 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
             }
         })
         .collect();
+    // The ride column is as wide as the longest name, so the columns line up.
+    let w = rows
+        .iter()
+        .map(|r| r.ride.chars().count())
+        .max()
+        .unwrap_or(0)
+        .max(4);
     println!(
-        "{:<40} {:>8} {:>6} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "{:<w$} {:>8} {:>6} {:>9} {:>9} {:>10} {:>8} {:>9}",
         "ride", "min", "fixes", "fit RMS", "vert RMS", "yaw bias", "gain", "ref RMS"
     );
     let mut failed = 0;
@@ -207,13 +253,13 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
                 let value = |e: &str, n: &str| r.value(e, n).unwrap_or(f64::NAN);
                 let vertical = r.stats.rms_baro_up_m.or(r.stats.rms_gps_up_m);
                 println!(
-                    "{:<40} {:>8.1} {:>6} {:>7.3} m {:>9} {:>5.3}°/s {:>8.4} {:>9}",
+                    "{:<w$} {:>8.1} {:>6} {:>7.3} m {:>9} {:>10} {:>8.4} {:>9}",
                     row.ride,
                     r.duration_s / 60.0,
                     r.gps_fixes,
                     r.stats.rms_horizontal_m,
                     vertical.map_or("-".into(), |v| format!("{v:.3} m")),
-                    r.bias_total[2].map_or(f64::NAN, |t| t.mean_dps),
+                    r.bias_total[2].map_or("-".into(), |t| format!("{:.3}°/s", t.mean_dps)),
                     value("odometer_gain", "gain"),
                     r.reference
                         .as_ref()
@@ -222,7 +268,7 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
             }
             Err(e) => {
                 failed += 1;
-                println!("{:<40} failed: {e}", row.ride);
+                println!("{:<w$} failed: {e}", row.ride);
             }
         }
     }

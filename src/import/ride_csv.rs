@@ -234,6 +234,18 @@ impl Columns {
                 .ok_or_else(|| field_err(name, "required column is missing from the header".into()))
         };
         let t = require(Known::T, "t_s")?;
+        let no_gyro = [Known::Gx, Known::Gy, Known::Gz]
+            .iter()
+            .all(|&k| find(k).is_none());
+        if no_gyro && find(Known::Lat).is_some() && find(Known::Lon).is_some() {
+            // A `truth.csv` beside a ride, opened as one: say what it is.
+            return Err(field_err(
+                "gx_dps",
+                format!(
+                    "a track of positions without a gyro (t_s, lat_deg, lon_deg): it can be the reference track of a ride that has one (--reference {file}, File > Open reference track); a ride log needs the gyro columns gx_dps, gy_dps, gz_dps"
+                ),
+            ));
+        }
         let gyro = [
             require(Known::Gx, "gx_dps")?,
             require(Known::Gy, "gy_dps")?,
@@ -808,6 +820,12 @@ mod tests {
         let e = err(&GOOD.replace("gz_dps,", "gq_dps,"));
         assert!(
             e.contains("bad.csv:3: column 'gz_dps': required column is missing"),
+            "{e}"
+        );
+        let e = err("t_s,lat_deg,lon_deg,alt_m\n0.0,52.5,13.3,40.0\n");
+        assert!(
+            e.starts_with("bad.csv:1: column 'gx_dps': a track of positions without a gyro")
+                && e.contains("--reference bad.csv"),
             "{e}"
         );
         let e = err(&GOOD.replace(",136.01,16.6", ",136.01"));
