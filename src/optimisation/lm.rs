@@ -126,6 +126,7 @@ pub fn iterate(
         None => LinearSystem::of(model, theta, free),
     };
     let cost = system.cost();
+    let entry = *state;
     let mut evaluations = 0;
     let mut trial = theta.to_vec();
     for _ in 0..MAX_TRIES {
@@ -164,6 +165,13 @@ pub fn iterate(
         state.lambda = (state.lambda * state.nu).clamp(LAMBDA_MIN, LAMBDA_MAX);
         state.nu = (state.nu * 2.0).min(1e6);
     }
+    // No step lowered the cost: the fit is at its minimum. The damping is
+    // left as it came, not as the failed tries raised it (up to 1e13): the
+    // next stage keeps it, and on a 6-hour ride whose step 1 had ended
+    // exactly at the minimum, step 2 after the noise search started at
+    // 1e13, took one step too short to gain and stopped far from its own
+    // minimum, 0.3 m further from the truth.
+    *state = entry;
     StepOutcome {
         cost_before: cost,
         cost,
@@ -171,5 +179,38 @@ pub fn iterate(
         converged: true,
         evaluations,
         evaluation: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::contract::{ModelSpec, Role};
+    use crate::signals::Signals;
+
+    /// At the minimum no step lowers the cost: the iteration says so and
+    /// leaves the damping as it found it.
+    #[test]
+    fn a_failed_iteration_leaves_the_damping_as_it_came() {
+        let log = crate::testing::winding_log(60.0, 50.0);
+        let signals = Arc::new(Signals::from_log(&log).expect("signals"));
+        let model = Model::new(signals, ModelSpec::default()).expect("model");
+        let mut theta = model.initial_params();
+        let free = model.free_mask(&[Role::Global, Role::Step1Only]);
+        let mut state = LmState::new(1e-3);
+        let mut failed = None;
+        for _ in 0..200 {
+            let before = state;
+            let outcome = iterate(None, &model, &mut theta, &free, &mut state, 0.0, false);
+            if !outcome.accepted {
+                failed = Some((before, outcome));
+                break;
+            }
+        }
+        let (before, outcome) = failed.expect("an iteration that finds no lower cost");
+        assert!(outcome.converged && outcome.evaluations == MAX_TRIES);
+        assert_eq!(state, before);
     }
 }
