@@ -633,19 +633,23 @@ fn a_batch_searches_subfolders_and_a_reference_beside_a_ride_is_not_a_ride() {
         ]);
         assert!(out.status.success());
     }
-    let out_dir = dir.path().join("out");
-    let out = gyropath(&[
-        "fit",
-        s(&drives),
-        "--reference",
-        "truth.csv",
-        "--out-dir",
-        s(&out_dir),
-        "--quiet",
-    ]);
-    let table = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{table}");
-    assert!(table.contains("2 rides, 2 fitted, 0 failed"), "{table}");
+    // The outputs inside the folder of drives: a second batch does not
+    // take the first one's paths for rides.
+    let out_dir = drives.join("out");
+    for _ in 0..2 {
+        let out = gyropath(&[
+            "fit",
+            s(&drives),
+            "--reference",
+            "truth.csv",
+            "--out-dir",
+            s(&out_dir),
+            "--quiet",
+        ]);
+        let table = String::from_utf8_lossy(&out.stdout);
+        assert!(out.status.success(), "{table}");
+        assert!(table.contains("2 rides, 2 fitted, 0 failed"), "{table}");
+    }
     for stem in ["a-ride", "deeper-ride"] {
         let report = out_dir.join(format!("{stem}-report.json"));
         let r: serde_json::Value =
@@ -653,6 +657,7 @@ fn a_batch_searches_subfolders_and_a_reference_beside_a_ride_is_not_a_ride() {
         let to_ref = r["reference"]["horizontal"]["rms_m"].as_f64();
         assert!(to_ref.is_some_and(|m| m < 5.0), "{stem}: {to_ref:?}");
     }
+    std::fs::remove_dir_all(&out_dir).unwrap();
     let out = gyropath(&["fit", s(&drives), "--quiet"]);
     let table = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(1), "{table}");

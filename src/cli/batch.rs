@@ -18,13 +18,23 @@ const MAX_FOLDER_DEPTH: usize = 8;
 /// given files and folders, sorted; folders are searched through their
 /// subfolders (a folder per drive, as `../shared/real` holds them), a rosbag2
 /// folder or comma2k19 segment being one ride. Hidden and symlinked folders
-/// are not entered, and a file that is the batch's reference track (`truth.csv`
-/// beside a ride for `--reference truth.csv`) is not a ride.
-fn collect_rides(inputs: &[PathBuf], reference: Option<&Path>) -> Result<Vec<PathBuf>> {
+/// are not entered, nor the batch's output folder (`rides/out` of an earlier
+/// `--out-dir rides/out`: its paths are no rides), and a file that is the
+/// batch's reference track (`truth.csv` beside a ride for `--reference
+/// truth.csv`) is not a ride.
+fn collect_rides(
+    inputs: &[PathBuf],
+    reference: Option<&Path>,
+    out_dir: Option<&Path>,
+) -> Result<Vec<PathBuf>> {
     let mut rides = Vec::new();
+    let skip = Skip {
+        reference,
+        out_dir: out_dir.and_then(|d| d.canonicalize().ok()),
+    };
     for input in inputs {
         if input.is_dir() && !gyropath::import::is_ride_folder(input) {
-            rides_in(input, reference, 0, &mut rides)?;
+            rides_in(input, &skip, 0, &mut rides)?;
         } else {
             rides.push(input.clone());
         }
@@ -37,13 +47,15 @@ fn collect_rides(inputs: &[PathBuf], reference: Option<&Path>) -> Result<Vec<Pat
     Ok(rides)
 }
 
+/// What [`collect_rides`] leaves out of a folder.
+struct Skip<'a> {
+    reference: Option<&'a Path>,
+    /// The batch's output folder, canonical (`None`: none, or not made yet).
+    out_dir: Option<PathBuf>,
+}
+
 /// The rides in `dir` and its subfolders, in sorted order (see [`collect_rides`]).
-fn rides_in(
-    dir: &Path,
-    reference: Option<&Path>,
-    depth: usize,
-    rides: &mut Vec<PathBuf>,
-) -> Result<()> {
+fn rides_in(dir: &Path, skip: &Skip, depth: usize, rides: &mut Vec<PathBuf>) -> Result<()> {
     let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
         .with_context(|| format!("cannot list {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -60,10 +72,11 @@ fn rides_in(
             rides.push(path);
         } else if path.is_dir() {
             let linked = path.symlink_metadata().is_ok_and(|m| m.is_symlink());
-            if !linked && depth < MAX_FOLDER_DEPTH {
-                rides_in(&path, reference, depth + 1, rides)?;
+            let output = skip.out_dir.is_some() && path.canonicalize().ok() == skip.out_dir;
+            if !linked && !output && depth < MAX_FOLDER_DEPTH {
+                rides_in(&path, skip, depth + 1, rides)?;
             }
-        } else if gyropath::import::is_ride_file(&path) && !is_reference(&path, reference) {
+        } else if gyropath::import::is_ride_file(&path) && !is_reference(&path, skip.reference) {
             rides.push(path);
         }
     }
@@ -206,7 +219,7 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
             .with_context(|| format!("cannot create the output folder {}", dir.display()))?;
     }
     let settings = args.settings_with_model()?;
-    let rides = collect_rides(&args.rides, args.reference.as_deref())?;
+    let rides = collect_rides(&args.rides, args.reference.as_deref(), out_dir)?;
     let stems = output_stems(&rides)?;
     let started = Instant::now();
     let rows: Vec<BatchRow> = rides
