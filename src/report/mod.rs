@@ -315,11 +315,8 @@ pub fn page(c: &Contents) -> Page {
             .warnings
             .iter()
             .filter(|w| {
-                !c.origin.is_some_and(|o| {
-                    o.verdicts
-                        .iter()
-                        .any(|v| **w == format!("{}: {}", v.subject, v.message))
-                })
+                !c.origin
+                    .is_some_and(|o| o.verdicts.iter().any(|v| **w == v.as_warning()))
             })
             .cloned()
             .collect(),

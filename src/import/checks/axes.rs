@@ -142,8 +142,6 @@ pub(super) fn course_vertical(
             turns[a].push(0.5 * (fixes[w[2]].turn[a] - fixes[w[0]].turn[a]));
         }
     }
-    // A fold from +0: an empty `f64` sum is -0.0, printed "-0 deg".
-    let total = dc.iter().fold(0.0, |s, d| s + d.abs());
     if dc.is_empty() {
         report.say(
             "vertical axis (GPS course)",
@@ -152,6 +150,7 @@ pub(super) fn course_vertical(
         );
         return None;
     }
+    let total: f64 = dc.iter().map(|d| d.abs()).sum();
     if dc.len() < 8 || total < 90.0 {
         report.say(
             "vertical axis (GPS course)",

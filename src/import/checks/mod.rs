@@ -77,6 +77,14 @@ pub struct Verdict {
     pub message: String,
 }
 
+impl Verdict {
+    /// The verdict as one warning line, "subject: message", as the
+    /// terminal prints it (and the HTML report recognises it by).
+    pub fn as_warning(&self) -> String {
+        format!("{}: {}", self.subject, self.message)
+    }
+}
+
 /// Which logged axis plays a role, with its sign and how strongly the data say so.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct AxisFinding {
@@ -164,7 +172,7 @@ impl CheckReport {
             .after_mounting(applied)
             .into_iter()
             .filter(|v| v.level >= Level::Warning)
-            .map(|v| format!("{}: {}", v.subject, v.message))
+            .map(|v| v.as_warning())
             .collect();
         if let Some(rec) = &self.recommended {
             let applied_or_identity = applied.cloned().unwrap_or_else(Mount::identity);
