@@ -217,7 +217,7 @@ fn checks_ui(ui: &mut egui::Ui, ride: &RideView) {
                     Level::Warning => egui::Color32::from_rgb(200, 150, 0),
                     Level::Problem => egui::Color32::from_rgb(210, 60, 60),
                 };
-                ui.colored_label(colour, format!("{}: {}", v.subject, v.message));
+                ui.colored_label(colour, v.as_warning());
             }
         });
 }
