@@ -6,7 +6,8 @@ use egui::Color32;
 use egui_plot::{Legend, Line, LineStyle, MarkerShape, Plot, Points};
 
 use super::axes::{nearest, nice_grid, nice_grid_y, nice_step, runs, thin_to_pixels, tick_label};
-use super::{GPS, OUTAGE, PATH, RESIDUAL_BINS, SCALE, SIGMA};
+use super::band::BandLayer;
+use super::{GPS, OUTAGE, PATH, RESIDUAL_BINS, SCALE};
 use crate::app::map_tiles::{MapBackground, attribution_ui};
 use crate::app::worker::{ReferenceView, RideView, SigmaView, Snapshot};
 
@@ -166,33 +167,28 @@ fn scale_bar_ui(ui: &egui::Ui, transform: &egui_plot::PlotTransform) {
     );
 }
 
-/// At most this many stretches of the band are drawn (each a filled quad:
-/// egui fills convex shapes only, and a band along a winding path is not).
-const BAND_QUADS: usize = 600;
+/// At most this many points of the band are drawn.
+const BAND_POINTS: usize = 2000;
 
 /// The path's 95 % band across the track (`diagnosis::view::cross_band`),
 /// filled under the path: it widens where the path is least sure (long
 /// outages, the ride's ends) and is as narrow as the fit says elsewhere.
 fn band_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView) {
     let band = crate::diagnosis::view::cross_band(&snap.path, &sigma.path);
-    let step = band.len().div_ceil(BAND_QUADS).max(1);
-    let kept: Vec<_> = band
+    let step = band.len().div_ceil(BAND_POINTS).max(1);
+    let points: Vec<_> = band
         .iter()
         .step_by(step)
         .chain(band.last())
-        .map(|b| b.edges())
+        .map(|b| {
+            let [l, r] = b.edges();
+            [[b.east, b.north], l, r]
+        })
         .collect();
-    for w in kept.windows(2) {
-        let ([l0, r0], [l1, r1]) = (w[0], w[1]);
-        plot.polygon(
-            egui_plot::Polygon::new("95 % band", vec![l0, l1, r1, r0])
-                .fill_color(SIGMA)
-                .stroke(egui::Stroke::NONE)
-                .allow_hover(false),
-        );
+    if points.len() >= 2 {
+        plot.add(BandLayer::new(points));
     }
 }
-
 #[cfg(test)]
 mod tests {
     use super::*;

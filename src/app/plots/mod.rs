@@ -9,6 +9,7 @@
 use egui::Color32;
 
 mod axes;
+mod band;
 mod history;
 mod map;
 mod progress;
