@@ -3,7 +3,7 @@
 
 use super::worker::RideSource;
 use super::{Command, GyropathApp};
-use crate::diagnosis::describe_estimates;
+use crate::diagnosis::{describe_estimates, shown};
 use crate::effects::short_model;
 
 impl GyropathApp {
@@ -134,7 +134,11 @@ impl GyropathApp {
                                 }
                             } else {
                                 ui.label(format!("{:.3} m", c.heldout_rms_m));
-                                ui.label(format!("{:+.1} % ({:.1})", 100.0 * c.drop, c.t_statistic))
+                                ui.label(format!(
+                                    "{:+.1} % ({:.1})",
+                                    shown(100.0 * c.drop, 1),
+                                    shown(c.t_statistic, 1)
+                                ))
                                 .on_hover_text(
                                     "drop: how much lower the held-out error is; t: how consistent the gain is across the validation blocks (significant: drop at least 2 % and t at least 3, or at least 10 % and 1.5)",
                                 );

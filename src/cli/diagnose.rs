@@ -264,8 +264,8 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
             i + 1,
             c.effect,
             c.heldout_rms_m,
-            100.0 * c.drop,
-            c.t_statistic,
+            gyropath::diagnosis::shown(100.0 * c.drop, 1),
+            gyropath::diagnosis::shown(c.t_statistic, 1),
             if c.significant { "yes" } else { "no" },
             c.reference
                 .as_ref()

@@ -27,6 +27,17 @@ pub use whiteness::{Whiteness, whiteness};
 use crate::effects::DEG_PER_RAD;
 use crate::model::Model;
 
+/// `x` as printed to `decimals` places, with a value that rounds to zero
+/// made `+0`: a drop of -0.0004 printed "-0.0 %" in the ranking, a sign
+/// that says nothing. Other values are returned unchanged.
+pub fn shown(x: f64, decimals: i32) -> f64 {
+    if (x * 10f64.powi(decimals)).round() == 0.0 {
+        0.0
+    } else {
+        x
+    }
+}
+
 /// The total gyro bias (constant plus segment, deg/s) over one stretch of the ride.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct SegmentBias {
@@ -98,5 +109,20 @@ pub fn segment_biases(model: &Model, theta: &[f64]) -> Vec<SegmentBias> {
                 bias_dps: total(&[]),
             }]
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::shown;
+
+    #[test]
+    fn a_value_that_rounds_to_zero_is_shown_without_a_sign() {
+        assert_eq!(format!("{:.1}", shown(-0.0004 * 100.0, 1)), "0.0");
+        assert_eq!(format!("{:.1}", shown(-0.0, 1)), "0.0");
+        assert_eq!(format!("{:.1}", shown(-0.06, 1)), "-0.1");
+        assert_eq!(format!("{:+.1}", shown(-0.04, 1)), "+0.0");
+        assert_eq!(shown(2.5, 3), 2.5);
+        assert!(shown(f64::NAN, 1).is_nan());
     }
 }
