@@ -14,14 +14,8 @@ fn main() {
         Some(cli::Command::Explain(a)) => cli::explain(a),
         Some(cli::Command::Import(a)) => cli::import(a),
         Some(cli::Command::Check(a)) => cli::check(a),
-        Some(cli::Command::Open(a)) => match &a.ride {
-            Some(ride) => a
-                .source
-                .options()
-                .and_then(|o| open_app(Some((ride.clone(), o)))),
-            None => open_app(None),
-        },
-        None => open_app(None),
+        Some(cli::Command::Open(a)) => open(a),
+        None => open_app(None, None),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -29,16 +23,34 @@ fn main() {
     }
 }
 
+/// `gyropath open`: the ride (or the sample) and a reference track. A
+/// reference that is not there fails here, before a window opens.
+fn open(a: &cli::OpenArgs) -> anyhow::Result<()> {
+    if let Some(r) = &a.reference
+        && !r.exists()
+    {
+        anyhow::bail!("reference track {}: no such file or folder", r.display());
+    }
+    let ride = match &a.ride {
+        Some(ride) => Some((ride.clone(), a.source.options()?)),
+        None => None,
+    };
+    open_app(ride, a.reference.clone())
+}
+
 #[cfg(feature = "app")]
 fn open_app(
     ride: Option<(std::path::PathBuf, gyropath::import::ImportOptions)>,
+    reference: Option<std::path::PathBuf>,
 ) -> anyhow::Result<()> {
-    gyropath::app::run(ride).map_err(|e| anyhow::anyhow!("cannot open the app window: {e}"))
+    gyropath::app::run(ride, reference)
+        .map_err(|e| anyhow::anyhow!("cannot open the app window: {e}"))
 }
 
 #[cfg(not(feature = "app"))]
 fn open_app(
     _ride: Option<(std::path::PathBuf, gyropath::import::ImportOptions)>,
+    _reference: Option<std::path::PathBuf>,
 ) -> anyhow::Result<()> {
     use clap::CommandFactory;
     let _ = cli::Cli::command().print_help();

@@ -762,3 +762,33 @@ fn heavy_tails_ticked_after_a_fit_run_all_their_rounds() {
     eprintln!("{law}");
     assert!(law.contains("Student-t fixes (nu 1.8)"), "{law}");
 }
+
+/// `gyropath open RIDE --reference FILE` asks for the reference as the app
+/// starts, before the worker has loaded the ride: it is taken after the
+/// ride, and the first fit's history row already says how far it is.
+#[test]
+fn a_reference_asked_for_at_start_is_loaded_after_the_ride() {
+    let drive = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/comma2k19-example1");
+    let mut app = GyropathApp::new(
+        AppSettings::default(),
+        gyropath::app::worker::RideSource::file(drive.join("ride.csv")),
+        || {},
+    );
+    app.apply(gyropath::app::Command::OpenReference(
+        drive.join("truth.csv"),
+    ));
+    let mut h = harness(app);
+    assert!(
+        step_until(&mut h, Duration::from_secs(120), |a| a
+            .history
+            .last()
+            .is_some_and(|r| r.reference_rms_m.is_some())),
+        "no error to the reference: {:?}",
+        h.state().error
+    );
+    assert!(h.state().error.is_none(), "{:?}", h.state().error);
+    let r = h.state().reference.as_ref().expect("reference view");
+    assert!((r.covered_s - 60.0).abs() < 1.0, "{}", r.covered_s);
+    let to_ref = h.state().history[0].reference_rms_m.expect("first row");
+    assert!((0.5..1.5).contains(&to_ref), "{to_ref} m");
+}

@@ -888,6 +888,24 @@ fn open_without_a_file_opens_the_sample_as_its_help_says() {
 }
 
 #[test]
+fn open_with_a_reference_that_is_not_there_fails_before_the_window() {
+    let out = Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .args(["open", "--reference", "no-such-truth.csv"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("reference track no-such-truth.csv: no such file"),
+        "{err}"
+    );
+    assert!(!err.contains("app window"), "{err}");
+}
+
+#[test]
 fn every_subcommands_help_has_an_example() {
     for sub in [
         "fit", "diagnose", "explain", "simulate", "import", "check", "open",

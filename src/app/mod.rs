@@ -618,8 +618,13 @@ fn spawn_dialog(f: impl FnOnce() + Send + 'static) {
         .spawn(f);
 }
 
-/// Open the app window on `ride` (the bundled sample when `None`).
-pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Result {
+/// The app's window on `ride` (the sample without one), with `reference`
+/// loaded as File > Open reference track loads it (the worker takes it
+/// after the ride, and matches it to the ride's clock).
+pub fn run(
+    ride: Option<(PathBuf, crate::import::ImportOptions)>,
+    reference: Option<PathBuf>,
+) -> eframe::Result {
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([1280.0, 800.0])
@@ -642,6 +647,9 @@ pub fn run(ride: Option<(PathBuf, crate::import::ImportOptions)>) -> eframe::Res
             app.map_background = Some(map_tiles::MapBackground::new(
                 map_tiles::TileServer::from_env(),
             ));
+            if let Some(path) = reference {
+                app.apply(Command::OpenReference(path));
+            }
             Ok(Box::new(app))
         }),
     )

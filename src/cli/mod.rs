@@ -103,6 +103,11 @@ pub struct OpenArgs {
     pub ride: Option<PathBuf>,
     #[command(flatten)]
     pub source: SourceArgs,
+    /// A better track of the same drive (RTK, an INS), loaded as File > Open
+    /// reference track loads it: drawn under the path, and the path's error
+    /// to it shown and plotted. Example: `gyropath open ride.csv --reference truth.csv`.
+    #[arg(long)]
+    pub reference: Option<PathBuf>,
 }
 
 /// How to read an input: topics of a bag, mounting, column map.
