@@ -292,3 +292,33 @@ fn a_temperature_driven_bias_is_found_and_its_yaw_coefficient_recovered() {
         correlation(&c, "bias_z", "temp_c");
     }
 }
+
+/// A plain minute that stays level enough to be fitted planar, on a road
+/// that climbs, with a barometer: the planar path does not climb, and its
+/// held-out error is horizontal, so neither a mounting pitch nor a
+/// barometer drift (each would stand in for the grade) is called missing.
+/// Before, the held-out error counted the barometer's vertical misfit here,
+/// and a 0.75 deg mounting pitch and a barometer drift came out at t 3.7.
+#[test]
+fn a_planar_ride_up_a_grade_is_not_told_its_sensor_is_pitched() {
+    let (_sim, sig) = common::ride(11, 60.0, &[]);
+    assert!(sig.attitude.is_planar(), "{:?}", sig.attitude);
+    assert!(sig.has_baro);
+    let d =
+        diagnose(sig, &settings(&["paper"]), &Folds::default(), &|_: &str| {}).expect("diagnose");
+    for cand in &d.ranking {
+        eprintln!(
+            "{} {:+.1} % t {:.1}",
+            cand.effect,
+            100.0 * cand.drop,
+            cand.t_statistic
+        );
+        assert!(!cand.significant, "{cand:?}");
+    }
+    let mount = d
+        .ranking
+        .iter()
+        .find(|c| c.effect == "mount_misalignment")
+        .expect("mount_misalignment ranked");
+    assert!(mount.drop < 0.02, "{mount:?}");
+}
