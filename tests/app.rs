@@ -792,3 +792,39 @@ fn a_reference_asked_for_at_start_is_loaded_after_the_ride() {
     let to_ref = h.state().history[0].reference_rms_m.expect("first row");
     assert!((0.5..1.5).contains(&to_ref), "{to_ref} m");
 }
+
+/// The bias plot draws the axes the model estimates: a planar model's roll
+/// and pitch biases are held at zero, and drawn as flat lines they read as
+/// results; a 3D ride's three axes are drawn.
+#[test]
+fn the_bias_plot_shows_only_the_axes_the_model_estimates() {
+    let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz/ride.csv");
+    for (source, planar) in [
+        (gyropath::app::worker::RideSource::file(berlin), true),
+        (sample_ride(), false),
+    ] {
+        let mut h = harness(GyropathApp::new(AppSettings::default(), source, || {}));
+        assert!(
+            step_until(&mut h, Duration::from_secs(120), |a| a
+                .snapshot
+                .as_ref()
+                .is_some_and(|s| !s.segments.is_empty())),
+            "no fit: {:?}",
+            h.state().error
+        );
+        h.run_steps(2);
+        assert_eq!(
+            h.state().ride.as_ref().expect("ride").attitude.is_planar(),
+            planar
+        );
+        assert!(h.query_all_by_label("bias z (yaw)").count() >= 1);
+        let roll = h.query_all_by_label("bias x (roll)").count();
+        let pitch = h.query_all_by_label("bias y (pitch)").count();
+        if planar {
+            assert_eq!((roll, pitch), (0, 0));
+        } else {
+            assert!(roll >= 1 && pitch >= 1, "{roll} {pitch}");
+        }
+    }
+}

@@ -36,7 +36,18 @@ pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32)
     let t0 = ride.t0;
     let r = time_plot("bias", height, "bias (deg/s)").show(ui, |plot| {
         let (lo, hi, px) = view(plot);
-        for (a, name) in ["x (roll)", "y (pitch)", "z (yaw)"].iter().enumerate() {
+        // A planar model estimates the yaw bias only: its roll and pitch
+        // biases are held at zero, not results, and are not drawn.
+        let axes = if ride.attitude.is_planar() {
+            2..3
+        } else {
+            0..3
+        };
+        for (a, name) in ["x (roll)", "y (pitch)", "z (yaw)"]
+            .iter()
+            .enumerate()
+            .filter(|(a, _)| axes.contains(a))
+        {
             let pts: Vec<[f64; 2]> = snap
                 .segments
                 .iter()
