@@ -120,7 +120,7 @@ fn not_told_from_zero(effect: &str, estimate: &BTreeMap<String, Estimate>) -> Op
     let told = estimate.is_empty()
         || estimate
             .values()
-            .any(|e| e.determined && !(e.value.abs() < MIN_Z * e.sigma));
+            .any(|e| e.determined && (e.sigma.is_nan() || e.value.abs() >= MIN_Z * e.sigma));
     (!told).then(|| {
         format!(
             "{effect}'s estimate ({}) is within {MIN_Z:.0} sigma of zero: the ride does not show it, and its held-out gain is the freedom it adds",
