@@ -872,16 +872,22 @@ fn diagnose_starts_with_the_answer_and_the_command_that_adds_it() {
     assert!(!String::from_utf8_lossy(&out.stdout).contains("-2 ln L"));
 }
 
-#[test]
-fn open_without_a_file_opens_the_sample_as_its_help_says() {
-    // No display here: it gets as far as the window, not to a missing argument.
-    let out = Command::new(env!("CARGO_BIN_EXE_gyropath"))
+/// `gyropath open ARGS` with no display to open a window on.
+fn open_headless(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_gyropath"))
         .arg("open")
+        .args(args)
         .env_remove("DISPLAY")
         .env_remove("WAYLAND_DISPLAY")
         .env_remove("WAYLAND_SOCKET")
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+fn open_without_a_file_opens_the_sample_as_its_help_says() {
+    // No display here: it gets as far as the window, not to a missing argument.
+    let out = open_headless(&[]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!err.contains("required"), "{err}");
     assert!(err.contains("cannot open the app window"), "{err}");
@@ -889,13 +895,7 @@ fn open_without_a_file_opens_the_sample_as_its_help_says() {
 
 #[test]
 fn open_with_a_reference_that_is_not_there_fails_before_the_window() {
-    let out = Command::new(env!("CARGO_BIN_EXE_gyropath"))
-        .args(["open", "--reference", "no-such-truth.csv"])
-        .env_remove("DISPLAY")
-        .env_remove("WAYLAND_DISPLAY")
-        .env_remove("WAYLAND_SOCKET")
-        .output()
-        .unwrap();
+    let out = open_headless(&["--reference", "no-such-truth.csv"]);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success());
     assert!(
