@@ -380,7 +380,17 @@ impl Svg {
             );
         }
         if !d.is_empty() {
-            _ = write!(self.out, r#"<path class="{class}" d="{d}"/>"#);
+            // Inside a nested `svg` the size of the plot area, which clips
+            // what lies outside it: the map's extent is the fixes' and the
+            // path's, and a wider band (the Husky robot's 12 m each side)
+            // ran over the axes and the legend.
+            let (w, h) = self.frame.area();
+            _ = write!(
+                self.out,
+                r#"<svg x="{LEFT}" y="{TOP}" width="{w}" height="{h}" viewBox="{LEFT} {TOP} {w} {h}"><path class="{class}" d="{d}"/></svg>"#,
+                w = n(w),
+                h = n(h)
+            );
         }
     }
 
@@ -465,6 +475,25 @@ mod tests {
         assert_eq!(tick_label(0.01, 0.01), "0.01");
         assert_eq!(tick_label(-0.0, 0.01), "0");
         assert!(nice_ticks(1.0, 1.0, 4).is_empty());
+    }
+
+    #[test]
+    fn a_band_is_clipped_to_the_plot_area() {
+        // A band 50 m each side of a 10 m path: far wider than the frame.
+        let frame = Frame::equal_aspect(400.0, 300.0, (0.0, 10.0), (-1.0, 1.0));
+        let mut s = Svg::new(frame, "band");
+        s.band(
+            &[((0.0, 50.0), (0.0, -50.0)), ((10.0, 50.0), (10.0, -50.0))],
+            "band",
+        );
+        let out = s.finish();
+        let (w, h) = frame.area();
+        let clip = format!(
+            r#"<svg x="{LEFT}" y="{TOP}" width="{w}" height="{h}" viewBox="{LEFT} {TOP} {w} {h}"><path class="band" d="M"#,
+            w = n(w),
+            h = n(h)
+        );
+        assert!(out.contains(&clip), "{out}");
     }
 
     #[test]
