@@ -189,6 +189,7 @@ fn band_ui(plot: &mut egui_plot::PlotUi<'_>, snap: &Snapshot, sigma: &SigmaView)
         plot.add(BandLayer::new(points));
     }
 }
+
 #[cfg(test)]
 mod tests {
     use super::*;
