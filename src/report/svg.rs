@@ -438,8 +438,26 @@ impl Svg {
     }
 
     /// A legend down the top-left corner of the plotting area (a map's,
-    /// whose corners are mostly empty and whose width varies).
+    /// whose corners are mostly empty and whose width varies), on a pale
+    /// backing: a wide 95 % band or a dense track may run under the corner
+    /// (the Husky robot's 12 m band did), and the keys must stay legible.
     pub fn legend_inside(&mut self, entries: &[(&str, &str)]) {
+        if entries.is_empty() {
+            return;
+        }
+        let widest = entries
+            .iter()
+            .map(|(_, label)| label.chars().count())
+            .max()
+            .unwrap_or(0);
+        _ = write!(
+            self.out,
+            r#"<rect class="legend-back" x="{x}" y="{y}" width="{w}" height="{h}" rx="3"/>"#,
+            x = n(LEFT + 3.0),
+            y = n(TOP + 3.0),
+            w = n(33.0 + 6.2 * widest as f64),
+            h = n(16.0 * entries.len() as f64 + 5.0)
+        );
         let mut y = TOP + 16.0;
         for (class, label) in entries {
             _ = write!(
@@ -475,6 +493,21 @@ mod tests {
         assert_eq!(tick_label(0.01, 0.01), "0.01");
         assert_eq!(tick_label(-0.0, 0.01), "0");
         assert!(nice_ticks(1.0, 1.0, 4).is_empty());
+    }
+
+    #[test]
+    fn a_map_legend_sits_on_a_backing_that_holds_its_longest_label() {
+        let frame = || Frame::new(400.0, 300.0, (0.0, 1.0), (0.0, 1.0));
+        let mut svg = Svg::new(frame(), "map");
+        svg.legend_inside(&[("fix", "GPS fixes"), ("band", "95 % band across the path")]);
+        let out = svg.finish();
+        let back = out.find("legend-back").expect("a backing");
+        assert!(back < out.find("GPS fixes").expect("a label"), "{out}");
+        // 33 + 6.2 x 25 characters wide, two rows of 16 + 5 high.
+        assert!(out.contains(r#"width="188.0" height="37.0""#), "{out}");
+        let mut empty = Svg::new(frame(), "map");
+        empty.legend_inside(&[]);
+        assert!(!empty.finish().contains("legend-back"));
     }
 
     #[test]
