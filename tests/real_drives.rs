@@ -213,6 +213,27 @@ fn real_drives_against_their_references() {
                     odometer.iter().all(|v| v.starts_with("ok")),
                     "{name}: {odometer:?}"
                 );
+                // Nor a warning that no gyro axis follows the GPS course:
+                // over stretches as long as the fixes' scatter asks, the car's
+                // yaw rate does (15 m chords read R^2 0.05, noise).
+                let vertical: Vec<String> = d
+                    .verdicts
+                    .iter()
+                    .filter(|v| v.subject.starts_with("vertical axis"))
+                    .map(|v| format!("{}: {}: {}", v.level.label(), v.subject, v.message))
+                    .collect();
+                assert!(
+                    vertical
+                        .iter()
+                        .any(|v| v.starts_with("ok: vertical axis: +z points up")),
+                    "{name}: {vertical:?}"
+                );
+                assert!(
+                    vertical
+                        .iter()
+                        .all(|v| v.starts_with("ok") || v.starts_with("info")),
+                    "{name}: {vertical:?}"
+                );
                 let m = default_fit.model();
                 let bias = m.range(m.effect_index("gyro_bias").expect("gyro_bias"));
                 let fixed = m.fixed_mask();

@@ -44,6 +44,14 @@ pub fn check(args: &CheckArgs) -> Result<()> {
     }
     _ = writeln!(text);
     match &report.recommended {
+        // Without an accelerometer the forward axis is not told (see the
+        // forward axis' verdict): only what the data say is claimed.
+        Some(m) if m.is_identity() && report.forward.is_none() => {
+            _ = writeln!(
+                text,
+                "mounting  as logged: z up, in deg/s (which axis is forward the data cannot tell)"
+            )
+        }
         Some(m) if m.is_identity() => {
             _ = writeln!(
                 text,

@@ -116,7 +116,7 @@ pub(super) fn course_vertical(
     fixes: &[AtFix],
     report: &mut CheckReport,
 ) -> Option<(AxisFinding, f64)> {
-    let idx = stretches(fixes);
+    let (idx, stretch_m) = stretches(fixes);
     let course = |a: usize, b: usize| {
         let (p, q) = (&fixes[a], &fixes[b]);
         let (de, dn) = (q.en[0] - p.en[0], q.en[1] - p.en[1]);
@@ -146,7 +146,7 @@ pub(super) fn course_vertical(
         report.say(
             "vertical axis (GPS course)",
             Level::Info,
-            format!("not checked: no straight stretch of {STRETCH_M} m between the fixes"),
+            format!("not checked: no straight stretch of {stretch_m:.0} m between the fixes"),
         );
         return None;
     }
@@ -156,7 +156,7 @@ pub(super) fn course_vertical(
             "vertical axis (GPS course)",
             Level::Info,
             format!(
-                "not checked: the track turns too little ({total:.0} deg over {} stretches of {STRETCH_M} m)",
+                "not checked: the track turns too little ({total:.0} deg over {} stretches of {stretch_m:.0} m)",
                 dc.len()
             ),
         );

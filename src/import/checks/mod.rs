@@ -42,7 +42,7 @@ use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
 use log::{sample_rate, saturation};
-use track::{AtFix, STRETCH_M, altitude, odometer_scale, quality, stretches, summarise};
+use track::{AtFix, altitude, odometer_scale, quality, stretches, summarise};
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]

@@ -63,9 +63,33 @@ pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
     out
 }
 
-/// Stretches of the track: indices of fixes at least [`STRETCH_M`] apart along the odometer.
-pub(super) fn stretches(fixes: &[AtFix]) -> Vec<usize> {
-    stretches_of(fixes, STRETCH_M)
+/// Stretches of the track: indices of fixes at least [`stretch_m`] apart
+/// along the odometer, and that length.
+pub(super) fn stretches(fixes: &[AtFix]) -> (Vec<usize>, f64) {
+    let length = stretch_m(fixes);
+    (stretches_of(fixes, length), length)
+}
+
+/// How long a stretch of GPS track must be to read the road rather than
+/// the fixes' noise: [`STRETCH_M`], or [`STRETCH_PER_SCATTER`] times the
+/// fixes' own scatter `s` where that is longer. A chord `L` between two
+/// fixes reads about `sqrt(L^2 + 2 s^2)` long (see [`STRETCH_PER_SCATTER`])
+/// and points up to `sqrt(2) s / L` rad off: Berlin's city fixes (a
+/// scatter of metres to tens) made 15 m chords' courses noise, and the
+/// course check warned that no gyro axis followed the GPS course (best
+/// R^2 0.05) where the one axis the car logs is its yaw rate. At
+/// `L = 10 s` a chord's course is some 8 deg off, a turn between two
+/// chords some 11 deg.
+pub(super) fn stretch_m(fixes: &[AtFix]) -> f64 {
+    STRETCH_M.max(STRETCH_PER_SCATTER * scatter_m(fixes))
+}
+
+/// The fixes' own scatter (m; 0 where it cannot be told), see
+/// [`crate::statistics::track_scatter_m`].
+fn scatter_m(fixes: &[AtFix]) -> f64 {
+    let t: Vec<f64> = fixes.iter().map(|f| f.t).collect();
+    let en: Vec<[f64; 2]> = fixes.iter().map(|f| f.en).collect();
+    crate::statistics::track_scatter_m(&t, &en).unwrap_or(0.0)
 }
 
 /// Indices of fixes at least `length` (m) apart along the odometer.
@@ -90,10 +114,7 @@ pub(super) const STRETCH_PER_SCATTER: f64 = 10.0;
 
 /// Odometer distance against the GPS track length, over stretches that moved.
 pub(super) fn odometer_scale(fixes: &[AtFix], report: &mut CheckReport) {
-    let t: Vec<f64> = fixes.iter().map(|f| f.t).collect();
-    let en: Vec<[f64; 2]> = fixes.iter().map(|f| f.en).collect();
-    let scatter = crate::statistics::track_scatter_m(&t, &en).unwrap_or(0.0);
-    let idx = stretches_of(fixes, STRETCH_M.max(STRETCH_PER_SCATTER * scatter));
+    let (idx, _) = stretches(fixes);
     let (mut odo, mut gps) = (0.0, 0.0);
     for w in idx.windows(2) {
         let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
