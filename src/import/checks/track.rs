@@ -105,8 +105,9 @@ pub(super) fn stretches_of(fixes: &[AtFix], length: f64) -> Vec<usize> {
     idx
 }
 
-/// Stretches for the odometer check are at least this many times the fixes'
-/// own scatter long: a chord `L` between two fixes with errors of scatter `s`
+/// Stretches for the odometer and course checks are at least this many
+/// times the fixes' own scatter long (see [`stretch_m`]): a chord `L`
+/// between two fixes with errors of scatter `s`
 /// reads about `sqrt(L^2 + 2 s^2)`, so city fixes 10-20 m off made 15 m
 /// stretches of GPS track 40 % longer than the road (Berlin read 0.728 m of
 /// odometer per GPS m); at `L = 10 s` the excess is 1 %.
