@@ -114,9 +114,9 @@ pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64) {
 /// The axis whose integrated rate follows the GPS course, and beta.
 pub(super) fn course_vertical(
     fixes: &[AtFix],
+    (idx, stretch_m): (&[usize], f64),
     report: &mut CheckReport,
 ) -> Option<(AxisFinding, f64)> {
-    let (idx, stretch_m) = stretches(fixes);
     let course = |a: usize, b: usize| {
         let (p, q) = (&fixes[a], &fixes[b]);
         let (de, dn) = (q.en[0] - p.en[0], q.en[1] - p.en[1]);

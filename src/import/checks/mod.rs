@@ -204,7 +204,10 @@ pub fn check(log: &RideLog) -> CheckReport {
     saturation(log, &mut report);
     let fixes = summarise(log);
     let accel_up = accelerometer_vertical(log, &mut report);
-    let course = course_vertical(&fixes, &mut report);
+    // One set of stretches (and one measure of the fixes' scatter) for the
+    // course and odometer checks.
+    let (idx, stretch_m) = stretches(&fixes);
+    let course = course_vertical(&fixes, (&idx, stretch_m), &mut report);
     let vertical = match (accel_up, course) {
         (Some(a), Some((c, _))) if a.axis != c.axis || a.sign != c.sign => {
             report.say(
@@ -250,7 +253,7 @@ pub fn check(log: &RideLog) -> CheckReport {
     }
     let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
     report.forward = forward;
-    odometer_scale(&fixes, &mut report);
+    odometer_scale(&fixes, &idx, &mut report);
     altitude(log, &fixes, &mut report);
     quality(log, &mut report);
     if let Some(v) = vertical {

@@ -113,9 +113,9 @@ pub(super) fn stretches_of(fixes: &[AtFix], length: f64) -> Vec<usize> {
 /// odometer per GPS m); at `L = 10 s` the excess is 1 %.
 pub(super) const STRETCH_PER_SCATTER: f64 = 10.0;
 
-/// Odometer distance against the GPS track length, over stretches that moved.
-pub(super) fn odometer_scale(fixes: &[AtFix], report: &mut CheckReport) {
-    let (idx, _) = stretches(fixes);
+/// Odometer distance against the GPS track length, over the stretches
+/// `idx` (see [`stretches`]) that moved.
+pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckReport) {
     let (mut odo, mut gps) = (0.0, 0.0);
     for w in idx.windows(2) {
         let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
