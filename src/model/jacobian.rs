@@ -16,7 +16,8 @@
 //! segment bias only inside its segment), so building the whole matrix costs
 //! O(N) plus one entry per (GPS row, parameter).
 
-use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, UnitQuaternion, Vector3};
+use rayon::prelude::*;
 
 use super::Model;
 use super::observe::{WanderDerivative, Whitener};
@@ -33,6 +34,7 @@ pub struct Linearisation {
 }
 
 /// The prefix sums `U_c`, `V_c`, `D_c` of every free parameter at the current row.
+#[derive(Clone)]
 pub(crate) struct PrefixSums {
     pub u: Vec<Vector3<f64>>,
     pub v: Vec<Vector3<f64>>,
@@ -46,7 +48,7 @@ pub(crate) struct PrefixSums {
 }
 
 impl PrefixSums {
-    fn new(np: usize) -> Self {
+    pub(crate) fn new(np: usize) -> Self {
         Self {
             u: vec![Vector3::zeros(); np],
             v: vec![Vector3::zeros(); np],
@@ -71,6 +73,18 @@ impl PrefixSums {
         self.u[i].cross(p) - self.v[i] + self.d[i]
     }
 
+    /// Adds `other`'s sums parameter by parameter (its newly active ones
+    /// join the active list; no step increments).
+    fn add(&mut self, other: &PrefixSums) {
+        for &i in &other.active {
+            self.u[i] += other.u[i];
+            self.v[i] += other.v[i];
+            self.d[i] += other.d[i];
+            self.activate(i);
+        }
+        self.step_d.clear();
+    }
+
     /// `d x / d c` for a point `x = p_j - beta Delta_j` inside the current step `j`:
     /// `U_c x x - V_c + D_c - beta v_{j,c}` (the rotation terms are linear in the point).
     #[inline]
@@ -87,6 +101,67 @@ impl PrefixSums {
     }
 }
 
+/// Rows per chunk (at least) of [`Model::prefix_sweep_chunked`]: a
+/// 30-minute ride at 100 Hz is six chunks, a 10-minute ride two, and the
+/// real drives of `../shared/real` (at most 12,000 rows) one. Unit tests use
+/// short chunks so that their short rides exercise the chaining.
+pub(crate) const PREFIX_CHUNK_ROWS: usize = if cfg!(test) { 300 } else { 10_000 };
+/// At most this many chunks: each holds the sums of every parameter (a
+/// 6-hour ride's 13,000 segment biases: 1 MB a chunk).
+const MAX_PREFIX_CHUNKS: usize = 16;
+
+/// What the chunks of [`Model::prefix_sweep_chunked`] gathered, in order,
+/// each with the prefix sums of its own steps.
+pub(crate) struct Chunked<T> {
+    pub chunks: Vec<(T, PrefixSums)>,
+}
+
+impl<T> Chunked<T> {
+    /// Calls `each(c, before, gathered)` chunk by chunk in order, `before`
+    /// the prefix sums of every chunk before `c` (what its own sums lack);
+    /// returns the sums at the end of the sweep.
+    pub fn each_with_before(
+        self,
+        np: usize,
+        mut each: impl FnMut(usize, &PrefixSums, T),
+    ) -> PrefixSums {
+        let mut before = PrefixSums::new(np);
+        for (c, (gathered, own)) in self.chunks.into_iter().enumerate() {
+            each(c, &before, gathered);
+            before.add(&own);
+        }
+        before
+    }
+
+    /// Per chunk the sums of the chunks before it (see [`Self::each_with_before`]).
+    pub fn befores(self, np: usize) -> Vec<PrefixSums> {
+        let mut out = Vec::with_capacity(self.chunks.len());
+        let total = self.each_with_before(np, |_, before, _| out.push(before.clone()));
+        drop(total);
+        out
+    }
+}
+
+/// Calls `at_row(row, ...)` if `row` is the next of `rows` not yet visited,
+/// then moves `visited` past it.
+#[inline]
+fn visit_row(
+    rows: &[usize],
+    visited: &mut usize,
+    row: usize,
+    p: &Vector3<f64>,
+    delta: &Vector3<f64>,
+    sums: &PrefixSums,
+    at_row: &mut impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
+) {
+    if rows.get(*visited) == Some(&row) {
+        at_row(row, p, delta, sums);
+        while rows.get(*visited) == Some(&row) {
+            *visited += 1;
+        }
+    }
+}
+
 impl Model {
     /// One forward sweep that keeps the prefix sums of the parameters where
     /// `free` is true, calling `at_row(row, p_row, Delta_row, sums)` at every
@@ -99,9 +174,142 @@ impl Model {
         rows: &[usize],
         mut at_row: impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
     ) {
-        let sig = &self.signals;
+        let (first, q0, p0, mut sums) = self.prefix_start(theta, free);
+        let mut visited = rows.partition_point(|&r| r < first);
+        self.prefix_steps(
+            theta,
+            free,
+            (first, self.horizon().saturating_sub(1)),
+            (q0, p0),
+            &mut sums,
+            rows,
+            &mut visited,
+            &mut at_row,
+        );
+    }
+
+    /// [`Model::prefix_sweep`] cut into chunks swept side by side. Chunk `c`
+    /// covers the steps `bounds[c] + 1 ..= bounds[c + 1]` (the first also the
+    /// start row) and starts from the attitude and position the path has there
+    /// (one cheap parallel pass of eq. 1-4, as the cost sweep's chunks are
+    /// chained) with its prefix sums at zero, or at `before[c]` where given
+    /// (the sums of the chunks before it, from a first sweep, see
+    /// [`Chunked::befores`]: the chunk's sums are then the ride's). Since every sum is a sum of
+    /// per-step increments that do not depend on the sums themselves,
+    ///
+    /// ```text
+    /// U_c(t) = U_c(a) + sum_{a < j <= t} u_{j,c}   (V_c and D_c alike)
+    /// d p_t / d c = dp_chunk(c, t) + U_c(a) x p_t - V_c(a) + D_c(a)
+    /// ```
+    ///
+    /// so a chunk's derivatives are its own plus an affine function of the
+    /// point, given by the sums of the chunks before it
+    /// ([`PrefixSums::dp`] of the `before` of [`Chunked::each_with_before`]).
+    /// Returns, per chunk, what `at_row` gathered into a fresh `init(c)` and
+    /// the chunk's sums at its end.
+    /// Rides shorter than two chunks are swept in one, exactly as
+    /// [`Model::prefix_sweep`] does; the cut depends only on the ride.
+    pub(crate) fn prefix_sweep_chunked<T: Send>(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        rows: &[usize],
+        before: Option<&[PrefixSums]>,
+        init: impl Fn(usize) -> T + Sync,
+        at_row: impl Fn(&mut T, usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums) + Sync,
+    ) -> Chunked<T> {
+        let (first, q0, p0, start_sums) = self.prefix_start(theta, free);
+        let bounds = self.prefix_bounds(first);
+        let k = bounds.len() - 1;
+        let starts = if k == 1 {
+            vec![(q0, p0)]
+        } else {
+            self.states_at(theta, (first, q0, p0), &bounds)
+        };
+        let mut start_sums = Some(start_sums);
+        let chunk_sums: Vec<PrefixSums> = (0..k)
+            .map(|c| match start_sums.take().filter(|_| c == 0) {
+                Some(s) => s,
+                None => before
+                    .and_then(|b| b.get(c))
+                    .cloned()
+                    .unwrap_or_else(|| PrefixSums::new(self.n_params())),
+            })
+            .collect();
+        let chunks: Vec<(T, PrefixSums)> = chunk_sums
+            .into_par_iter()
+            .enumerate()
+            .map(|(c, mut sums)| {
+                let mut out = init(c);
+                // The first chunk also visits the rows before the start (none
+                // are swept) and the start row itself.
+                let from = if c == 0 { first } else { bounds[c] + 1 };
+                let mut visited = rows.partition_point(|&r| r < from);
+                let (q, p) = starts[c];
+                let mut visit = |row: usize, p: &Vector3<f64>, d: &Vector3<f64>, s: &PrefixSums| {
+                    at_row(&mut out, row, p, d, s)
+                };
+                if c == 0 {
+                    self.prefix_steps(
+                        theta,
+                        free,
+                        (first, bounds[1]),
+                        (q, p),
+                        &mut sums,
+                        rows,
+                        &mut visited,
+                        &mut visit,
+                    );
+                } else {
+                    self.prefix_steps_after(
+                        theta,
+                        free,
+                        (bounds[c], bounds[c + 1]),
+                        (q, p),
+                        &mut sums,
+                        rows,
+                        &mut visited,
+                        &mut visit,
+                    );
+                }
+                (out, sums)
+            })
+            .collect();
+        Chunked { chunks }
+    }
+
+    /// How many chunks [`Model::prefix_sweep_chunked`] cuts the ride into.
+    pub(crate) fn prefix_chunk_count(&self, theta: &[f64], free: &[bool]) -> usize {
+        self.prefix_bounds(self.prefix_first(theta, free)).len() - 1
+    }
+
+    /// The chunks' bounds of a chunked sweep from row `first` (see
+    /// [`Model::prefix_sweep_chunked`]).
+    fn prefix_bounds(&self, first: usize) -> Vec<usize> {
+        let steps = self.horizon().saturating_sub(1).saturating_sub(first);
+        let k = (steps / PREFIX_CHUNK_ROWS).clamp(1, MAX_PREFIX_CHUNKS);
+        (0..=k).map(|c| first + steps * c / k).collect()
+    }
+
+    /// The row a prefix sweep starts at: the anchor's when nothing free
+    /// acts before it, else 0.
+    fn prefix_first(&self, theta: &[f64], free: &[bool]) -> usize {
+        match self.anchor_for(theta) {
+            Some(a) if self.anchor_holds(free) => a.row,
+            _ => 0,
+        }
+    }
+
+    /// Where a prefix sweep starts at `theta` over the `free` parameters: the
+    /// anchor (when nothing free acts before it) or row 0, its attitude and
+    /// position, and the sums there (the initial position's and orientation's
+    /// derivatives when the sweep starts at row 0).
+    fn prefix_start(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+    ) -> (usize, UnitQuaternion<f64>, Vector3<f64>, PrefixSums) {
         let mut sums = PrefixSums::new(self.n_params());
-        // From the anchor when nothing free acts before it, else from the start.
         let (first, q0, p0, phi) = match self.anchor_for(theta) {
             Some(a) if self.anchor_holds(free) => (a.row, a.q, a.p, Vector3::zeros()),
             _ => {
@@ -129,23 +337,91 @@ impl Model {
                 }
             }
         }
-        let (f, f_parts) = self.forward_axis(theta);
-        let mut k = 0;
-        let mut visit = |row: usize, p: &Vector3<f64>, delta: &Vector3<f64>, sums: &PrefixSums| {
-            if k < rows.len() && rows[k] == row {
-                at_row(row, p, delta, sums);
-                while k < rows.len() && rows[k] == row {
-                    k += 1;
+        (first, q0, p0, sums)
+    }
+
+    /// Attitude and position at each of `bounds` but the last (non-decreasing
+    /// rows from `first`), by eq. 1-4 integrated chunk by chunk from the
+    /// identity side by side and chained (`q_b = q_a r`, `p_b = p_a + q_a s`),
+    /// as [`Model::forward`] does.
+    fn states_at(
+        &self,
+        theta: &[f64],
+        (first, q0, p0): (usize, UnitQuaternion<f64>, Vector3<f64>),
+        bounds: &[usize],
+    ) -> Vec<(UnitQuaternion<f64>, Vector3<f64>)> {
+        let sig = &self.signals;
+        let (f, _) = self.forward_axis(theta);
+        let inc = self.spec.increment;
+        let ends: Vec<(UnitQuaternion<f64>, Vector3<f64>)> = bounds
+            .windows(2)
+            .collect::<Vec<_>>()
+            .into_par_iter()
+            .map(|w| {
+                let (a, b) = (w[0], w[1]);
+                let rates = self.corrected_rates(theta, (a + 1, b + 1), false).0;
+                let dist = self.corrected_distances(theta, (a + 1, b + 1), false).0;
+                let mut r = UnitQuaternion::identity();
+                let mut s = Vector3::zeros();
+                for j in a + 1..=b {
+                    r *= inc.quaternion(&(rates[j - a - 1] * sig.dt[j]));
+                    s += r * (f * dist[j - a - 1]);
                 }
-            }
-        };
-        visit(first, &p0, &Vector3::zeros(), &sums);
+                (r, s)
+            })
+            .collect();
+        debug_assert_eq!(bounds.first(), Some(&first));
+        let (mut q, mut p) = (q0, p0);
+        let mut out = Vec::with_capacity(ends.len());
+        for (r, s) in ends {
+            out.push((q, p));
+            p += q * s;
+            q *= r;
+        }
+        out
+    }
+
+    /// The start row `from` (visited) and then the steps `from + 1 ..= to`
+    /// (see [`Model::prefix_steps_after`]).
+    #[allow(clippy::too_many_arguments)]
+    fn prefix_steps(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        (from, to): (usize, usize),
+        (q, p): (UnitQuaternion<f64>, Vector3<f64>),
+        sums: &mut PrefixSums,
+        rows: &[usize],
+        visited: &mut usize,
+        at_row: &mut impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
+    ) {
+        visit_row(rows, visited, from, &p, &Vector3::zeros(), sums, at_row);
+        self.prefix_steps_after(theta, free, (from, to), (q, p), sums, rows, visited, at_row);
+    }
+
+    /// Steps `from + 1 ..= to` from the attitude `q` and position `p` at row
+    /// `from`, adding each step's increments to `sums` and calling `at_row`
+    /// at the rows of `rows` from index `visited` on (once per row).
+    #[allow(clippy::too_many_arguments)]
+    fn prefix_steps_after(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        (from, to): (usize, usize),
+        (q0, p0): (UnitQuaternion<f64>, Vector3<f64>),
+        sums: &mut PrefixSums,
+        rows: &[usize],
+        visited: &mut usize,
+        at_row: &mut impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
+    ) {
+        let sig = &self.signals;
+        let (f, f_parts) = self.forward_axis(theta);
         let mut chain = vec![Vector3::zeros(); self.gyro_chain.len() + 1];
         let mut dchain = vec![0.0; self.distance_chain.len() + 1];
         let mut q = q0;
         let mut p = p0;
         let inc = self.spec.increment;
-        for j in first + 1..self.horizon() {
+        for j in from + 1..(to + 1).min(self.horizon()) {
             chain[0] = sig.gyro[j];
             for (i, &e) in self.gyro_chain.iter().enumerate() {
                 chain[i + 1] = self.effects[e].gyro(self.params_of(e, theta), j, chain[i]);
@@ -200,7 +476,7 @@ impl Model {
             }
             let delta = dir * d;
             p += delta;
-            visit(j, &p, &delta, &sums);
+            visit_row(rows, visited, j, &p, &delta, sums, at_row);
         }
     }
 

@@ -82,6 +82,17 @@ pub(crate) struct ChainLinearisation {
     pub horizon: usize,
 }
 
+/// What one chunk of [`Model::chain_linearisation`]'s sweep gathered: from
+/// observation `first` on, each one's point, global row (row-major) and
+/// partial block row.
+#[derive(Default)]
+struct Gathered {
+    first: Option<usize>,
+    at: Vec<Vector3<f64>>,
+    jg: Vec<f64>,
+    jb: Vec<(u32, [f64; 3])>,
+}
+
 /// A group of local columns acting on the same stretch of steps.
 #[derive(Clone, Debug)]
 pub(crate) struct Block {
@@ -178,10 +189,49 @@ impl Model {
         }
         let ng = globals.len();
 
-        // Forward sweep: per observation, h_o, the global row and the partial block row.
+        // Forward sweep, chunk by chunk side by side: per observation, h_o,
+        // the global row and the partial block row, each chunk's derivatives
+        // its own steps' (see `Model::prefix_sweep_chunked`).
         let obs = &self.observations;
         let no = obs.len();
         let plan = self.obs_plan(theta);
+        let chunked = self.prefix_sweep_chunked(
+            theta,
+            free,
+            &plan.row,
+            None,
+            |_| Gathered::default(),
+            |out, row, p_row, delta, sums| {
+                let mut k = plan.row.partition_point(|&r| r < row);
+                if out.first.is_none() {
+                    out.first = Some(k);
+                }
+                while k < no && plan.row[k] == row {
+                    let a = obs[k].axis;
+                    let beta = plan.beta[k];
+                    let p = plan.position(k, p_row, delta);
+                    out.at.push(p);
+                    for &i in &globals {
+                        out.jg.push(sums.dp_at(i, &p, beta)[a]);
+                    }
+                    let at = out.jg.len() - ng;
+                    plan.for_extra(k, a, delta, sig.dt[row], |i, d| {
+                        if let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX) {
+                            out.jg[at + g] += d;
+                        }
+                    });
+                    let b = block_at[row];
+                    let mut vals = [0.0; 3];
+                    if b != u32::MAX {
+                        for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
+                            vals[kk] = sums.dp_at(i, &p, beta)[a];
+                        }
+                    }
+                    out.jb.push((b, vals));
+                    k += 1;
+                }
+            },
+        );
         let mut h = vec![V9::zeros(); no];
         let mut at = vec![Vector3::zeros(); no];
         let mut xs = vec![0.0; no];
@@ -190,31 +240,19 @@ impl Model {
         let mut r = DVector::<f64>::zeros(no);
         let mut slope = vec![(1.0, 0.0); no];
         let mut white = Whitener::new(&plan, obs);
-        let mut k = 0usize;
-        let mut y: Vec<Vec<V9>> = blocks
-            .iter()
-            .map(|b| vec![V9::zeros(); b.params.len()])
-            .collect();
-        let mut next_block = 0;
-        self.prefix_sweep(theta, free, &plan.row, |row, p_row, delta, sums| {
-            while k < no && plan.row[k] == row {
-                let o = &obs[k];
-                let a = o.axis;
-                let beta = plan.beta[k];
-                let p = plan.position(k, p_row, delta);
-                at[k] = p;
+        let mut last_row = None;
+        let total = chunked.each_with_before(np, |c, before, gathered| {
+            let Some(first) = gathered.first else {
+                return;
+            };
+            for (n, p) in gathered.at.iter().enumerate() {
+                let k = first + n;
+                let a = obs[k].axis;
+                at[k] = *p;
                 xs[k] = p[a];
                 let v = white.value(k, p[a]);
                 r[k] = v.r;
                 slope[k] = (v.slope, v.back);
-                for (g, &i) in globals.iter().enumerate() {
-                    jg[(k, g)] = sums.dp_at(i, &p, beta)[a];
-                }
-                plan.for_extra(k, a, delta, sig.dt[row], |i, d| {
-                    if let Some(&g) = global_of.get(i).filter(|&&g| g != usize::MAX) {
-                        jg[(k, g)] += d;
-                    }
-                });
                 // h_o: (row a of -[p]x, -e_a, e_a).
                 let mut hv = V9::zeros();
                 match a {
@@ -234,31 +272,44 @@ impl Model {
                 hv[3 + a] = -1.0;
                 hv[6 + a] = 1.0;
                 h[k] = hv;
-                let b = block_at[row];
+                // The chunks before this one: their sums act on every later point.
+                let earlier = |i: usize| if c == 0 { 0.0 } else { before.dp(i, p)[a] };
+                for (g, &i) in globals.iter().enumerate() {
+                    jg[(k, g)] = gathered.jg[n * ng + g] + earlier(i);
+                }
+                let (b, mut vals) = gathered.jb[n];
                 if b != u32::MAX {
-                    let mut vals = [0.0; 3];
                     for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
-                        vals[kk] = sums.dp_at(i, &p, beta)[a];
+                        vals[kk] += earlier(i);
                     }
-                    jb[k] = (b, vals);
                 }
-                k += 1;
-            }
-            // y_c of blocks that ended before this row are final: record them
-            // (blocks are disjoint and sorted, so they end in order).
-            while next_block < blocks.len() && blocks[next_block].last < row {
-                for (x, &i) in blocks[next_block].params.iter().enumerate() {
-                    y[next_block][x] = V9::from_iterator(
-                        sums.u[i]
-                            .iter()
-                            .chain(sums.v[i].iter())
-                            .chain(sums.d[i].iter())
-                            .copied(),
-                    );
-                }
-                next_block += 1;
+                jb[k] = (b, vals);
+                last_row = Some(plan.row[k]);
             }
         });
+        // y_c of the blocks that ended before the last observed row: their
+        // sums are final there (a block's parameters act on its steps only).
+        let y: Vec<Vec<V9>> = blocks
+            .iter()
+            .map(|b| {
+                b.params
+                    .iter()
+                    .map(|&i| {
+                        if last_row.is_some_and(|row| b.last < row) {
+                            V9::from_iterator(
+                                total.u[i]
+                                    .iter()
+                                    .chain(total.v[i].iter())
+                                    .chain(total.d[i].iter())
+                                    .copied(),
+                            )
+                        } else {
+                            V9::zeros()
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
 
         let cost = r.norm_squared();
         let mut prior = self.prior_rows(theta);

@@ -112,14 +112,34 @@ impl Model {
         };
         let widen = inflation * inflation;
         let mut path = vec![[f64::NAN; 4]; rows.len()];
-        let mut k = 0;
-        self.prefix_sweep(theta, &free, rows, |row, p, _, sums| {
-            while k < rows.len() && rows[k] == row {
-                let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
-                path[k] = c.map(|v| v * widen);
-                k += 1;
-            }
+        // Chunks side by side (the covariance at every row is most of the
+        // work), each from the sums of those before it: one sweep without
+        // visits finds them when there is more than one chunk.
+        let befores = (self.prefix_chunk_count(theta, &free) > 1).then(|| {
+            self.prefix_sweep_chunked(theta, &free, &[], None, |_| (), |_, _, _, _, _| {})
+                .befores(self.n_params())
         });
+        let chunks = self.prefix_sweep_chunked(
+            theta,
+            &free,
+            rows,
+            befores.as_deref(),
+            |_| (None, Vec::new()),
+            |(first, out): &mut (Option<usize>, Vec<[f64; 4]>), row, p, _, sums| {
+                let mut k = rows.partition_point(|&r| r < row);
+                first.get_or_insert(k);
+                while k < rows.len() && rows[k] == row {
+                    let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
+                    out.push(c.map(|v| v * widen));
+                    k += 1;
+                }
+            },
+        );
+        for ((first, out), _) in chunks.chunks {
+            if let Some(first) = first {
+                path[first..first + out.len()].copy_from_slice(&out);
+            }
+        }
         self.add_along_track_spread(theta, rows, &mut path);
         Some(Uncertainty { params, path })
     }
@@ -375,6 +395,42 @@ mod tests {
                 seen += 1;
             });
             assert!(seen > 200, "{seen} rows");
+        }
+    }
+
+    /// The path's covariance at every row, swept in chunks side by side
+    /// (each from the sums of those before it), equals the same covariance
+    /// from one sweep of the whole ride, row by row.
+    #[test]
+    fn the_chunked_path_covariance_is_the_one_sweeps() {
+        for (tau, white) in NOISES {
+            let (m, p, free, _, _) = dense_case(tau, white);
+            assert!(
+                m.prefix_chunk_count(&p, &free) > 5,
+                "the test ride is one chunk"
+            );
+            let u = m.uncertainty(&p).expect("uncertainty");
+            let chain = m.chain_system(&p, &free).expect("chain");
+            let marg = chain.marginals(PathRows::All).expect("marginals");
+            let widen = m.residual_inflation(&p).powi(2);
+            let mut rows = 0;
+            m.prefix_sweep(
+                &p,
+                &free,
+                &(0..m.signals.len()).collect::<Vec<_>>(),
+                |row, pos, _, sums| {
+                    let one = marg.path_covariance(row, pos, |i| sums.dp(i, pos));
+                    for (a, b) in one.iter().zip(&u.path[row]) {
+                        assert!(
+                            (a * widen - b).abs() <= 1e-9 * b.abs().max(1e-6),
+                            "tau {tau:?} row {row}: {one:?} against {:?}",
+                            u.path[row]
+                        );
+                    }
+                    rows += 1;
+                },
+            );
+            assert_eq!(rows, m.signals.len());
         }
     }
 
