@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
+use rayon::prelude::*;
 use thiserror::Error;
 
 use crate::model::rotation::compass_deg;
@@ -261,18 +262,51 @@ pub fn write_path_csv(
             ""
         }
     )?;
-    // Row by row from one sweep: a 6-hour ride's path is never held in memory.
+    // From one sweep, a block of poses at a time (a 6-hour ride's path is
+    // never held in memory), each block's lines formatted side by side:
+    // formatting is most of the work (about 0.1 s a 30-minute ride).
+    let mut block: Vec<(usize, nalgebra::UnitQuaternion<f64>, nalgebra::Vector3<f64>)> =
+        Vec::with_capacity(WRITE_BLOCK_ROWS);
     let mut result = Ok(());
-    model.for_each_pose(theta, |j, q, p| {
-        if result.is_err() {
-            return;
+    let mut flush = |block: &mut Vec<_>, result: &mut std::io::Result<()>| {
+        if result.is_ok() {
+            let text: Vec<String> = block
+                .par_chunks(WRITE_BLOCK_ROWS / 8)
+                .map(|rows| path_lines(sig, sigma, rows))
+                .collect();
+            *result = text.iter().try_for_each(|t| out.write_all(t.as_bytes()));
         }
+        block.clear();
+    };
+    model.for_each_pose(theta, |j, q, p| {
+        block.push((j, *q, *p));
+        if block.len() == WRITE_BLOCK_ROWS {
+            flush(&mut block, &mut result);
+        }
+    });
+    flush(&mut block, &mut result);
+    result
+}
+
+/// Rows of a path file formatted at a time (see [`write_path_csv`]).
+const WRITE_BLOCK_ROWS: usize = 16_384;
+
+/// The path file's lines of `rows` (row, attitude, position).
+fn path_lines(
+    sig: &crate::signals::Signals,
+    sigma: Option<&Uncertainty>,
+    rows: &[(usize, nalgebra::UnitQuaternion<f64>, nalgebra::Vector3<f64>)],
+) -> String {
+    use std::fmt::Write as _;
+    let mut text = String::with_capacity(rows.len() * 96);
+    for (j, q, p) in rows {
         let g = sig.frame.to_geodetic(p);
         let f = q * nalgebra::Vector3::x();
-        result = write!(
-            out,
+        // Writing to a String cannot fail.
+        let _ = write!(
+            text,
             "{},{},{},{},{},{},{},{}",
-            sig.t[j],
+            sig.t[*j],
             Fixed(g.lat_deg, 9),
             Fixed(g.lon_deg, 9),
             Fixed(g.alt_m, 3),
@@ -280,16 +314,16 @@ pub fn write_path_csv(
             Fixed(p.y, 3),
             Fixed(p.z, 3),
             Fixed(compass_deg(f.x, f.y), 2)
-        )
-        .and_then(|_| match sigma {
+        );
+        let _ = match sigma {
             Some(u) => {
-                let [e, n, up] = u.sigma_enu(j);
-                writeln!(out, ",{},{},{}", Fixed(e, 3), Fixed(n, 3), Fixed(up, 3))
+                let [e, n, up] = u.sigma_enu(*j);
+                writeln!(text, ",{},{},{}", Fixed(e, 3), Fixed(n, 3), Fixed(up, 3))
             }
-            None => writeln!(out),
-        });
-    });
-    result
+            None => writeln!(text),
+        };
+    }
+    text
 }
 
 /// `x` with `decimals` digits after the point, exactly as `{:.N}` writes
