@@ -214,7 +214,7 @@ impl Model {
         theta: &[f64],
         free: &[bool],
         rows: &[usize],
-        before: Option<&[PrefixSums]>,
+        before: Option<Vec<PrefixSums>>,
         init: impl Fn(usize) -> T + Sync,
         at_row: impl Fn(&mut T, usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums) + Sync,
     ) -> Chunked<T> {
@@ -226,14 +226,17 @@ impl Model {
         } else {
             self.states_at(theta, (first, q0, p0), &bounds)
         };
+        // The first chunk starts from the start's sums, the others from
+        // those given (or zero).
+        let mut before = before.unwrap_or_default().into_iter();
         let mut start_sums = Some(start_sums);
         let chunk_sums: Vec<PrefixSums> = (0..k)
-            .map(|c| match start_sums.take().filter(|_| c == 0) {
-                Some(s) => s,
-                None => before
-                    .and_then(|b| b.get(c))
-                    .cloned()
-                    .unwrap_or_else(|| PrefixSums::new(self.n_params())),
+            .map(|_| {
+                let given = before.next();
+                start_sums
+                    .take()
+                    .or(given)
+                    .unwrap_or_else(|| PrefixSums::new(self.n_params()))
             })
             .collect();
         let chunks: Vec<(T, PrefixSums)> = chunk_sums
@@ -281,6 +284,26 @@ impl Model {
     /// How many chunks [`Model::prefix_sweep_chunked`] cuts the ride into.
     pub(crate) fn prefix_chunk_count(&self, theta: &[f64], free: &[bool]) -> usize {
         self.prefix_bounds(self.prefix_first(theta, free)).len() - 1
+    }
+
+    /// Per chunk of [`Model::prefix_sweep_chunked`], the indices of `rows`
+    /// (non-decreasing) that it visits.
+    pub(crate) fn prefix_chunk_spans(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        rows: &[usize],
+    ) -> Vec<std::ops::Range<usize>> {
+        let first = self.prefix_first(theta, free);
+        let bounds = self.prefix_bounds(first);
+        let last = self.horizon().saturating_sub(1);
+        (0..bounds.len() - 1)
+            .map(|c| {
+                let from = if c == 0 { first } else { bounds[c] + 1 };
+                let to = bounds[c + 1].min(last);
+                rows.partition_point(|&r| r < from)..rows.partition_point(|&r| r <= to)
+            })
+            .collect()
     }
 
     /// The chunks' bounds of a chunked sweep from row `first` (see

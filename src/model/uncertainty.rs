@@ -119,27 +119,42 @@ impl Model {
             self.prefix_sweep_chunked(theta, &free, &[], None, |_| (), |_, _, _, _, _| {})
                 .befores(self.n_params())
         });
-        let chunks = self.prefix_sweep_chunked(
+        // Each chunk writes the rows it visits in place (a 6-hour ride's
+        // covariances are 69 MB: gathered apart and copied they were twice that).
+        let spans = self.prefix_chunk_spans(theta, &free, rows);
+        let mut slices = Vec::with_capacity(spans.len());
+        let mut rest = &mut path[..];
+        let mut at = 0;
+        for span in &spans {
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(span.start - at);
+            let (own, tail) = tail.split_at_mut(span.len());
+            slices.push(Some((span.start, own)));
+            (rest, at) = (tail, span.end);
+        }
+        let slices = std::sync::Mutex::new(slices);
+        self.prefix_sweep_chunked(
             theta,
             &free,
             rows,
-            befores.as_deref(),
-            |_| (None, Vec::new()),
-            |(first, out): &mut (Option<usize>, Vec<[f64; 4]>), row, p, _, sums| {
+            befores,
+            |c| {
+                slices
+                    .lock()
+                    .ok()
+                    .and_then(|mut s| s.get_mut(c).and_then(Option::take))
+            },
+            |out: &mut Option<(usize, &mut [[f64; 4]])>, row, p, _, sums| {
+                let Some((start, out)) = out else { return };
                 let mut k = rows.partition_point(|&r| r < row);
-                first.get_or_insert(k);
                 while k < rows.len() && rows[k] == row {
                     let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
-                    out.push(c.map(|v| v * widen));
+                    if let Some(slot) = out.get_mut(k - *start) {
+                        *slot = c.map(|v| v * widen);
+                    }
                     k += 1;
                 }
             },
         );
-        for ((first, out), _) in chunks.chunks {
-            if let Some(first) = first {
-                path[first..first + out.len()].copy_from_slice(&out);
-            }
-        }
         self.add_along_track_spread(theta, rows, &mut path);
         Some(Uncertainty { params, path })
     }
