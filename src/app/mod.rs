@@ -633,6 +633,11 @@ pub fn run(
             .with_drag_and_drop(true),
         ..Default::default()
     };
+    // The fit's pool threads yield to the window (see `background_priority`);
+    // a pool already built (by an earlier command in this process) keeps its own.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .start_handler(|_| worker::background_priority())
+        .build_global();
     eframe::run_native(
         "gyropath",
         options,

@@ -217,6 +217,28 @@ pub struct WorkerHandle {
     pub rx: Receiver<Update>,
 }
 
+/// How much less (in nice steps) the app's background threads get of a
+/// busy machine than the window's thread.
+#[cfg(target_os = "linux")]
+const BACKGROUND_NICE: libc::c_int = 10;
+
+/// Lowers the calling thread to a background priority: the fit's thread,
+/// its rayon pool (see [`super::run`]), validation and diagnosis. On a
+/// 2-core machine the fit's two pool threads and the window's thread share
+/// the cores, and without it the window's frames waited behind the fit's
+/// linearisations; the scheduler now gives the window the core it asks for
+/// and the fit the rest. On Linux a thread's nice value is its own
+/// (`pthreads(7)`); elsewhere the threads keep the process's priority.
+pub(crate) fn background_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: `gettid` and `setpriority` on the calling thread's own id read
+    // and write no memory of ours; a failure leaves the priority as it was.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, BACKGROUND_NICE);
+    }
+}
+
 impl WorkerHandle {
     /// Start the worker; `wake` is called after every update it sends (the UI's
     /// `request_repaint`).
@@ -226,6 +248,7 @@ impl WorkerHandle {
         let spawned = std::thread::Builder::new()
             .name("gyropath-worker".into())
             .spawn(move || {
+                background_priority();
                 let wake: Arc<dyn Fn() + Send + Sync> = Arc::new(wake);
                 // A bug that panics must not leave a window that silently
                 // stops answering: say so and start a fresh worker.
@@ -521,6 +544,7 @@ impl Worker {
         let tx = self.tx.clone();
         let wake = self.wake_handle();
         std::thread::spawn(move || {
+            background_priority();
             let held_out = held_out_rms(&model, &theta, &settings, &Folds::default())
                 .map_err(|e| e.to_string());
             let _ = tx.send(Update::HeldOut {
@@ -546,6 +570,7 @@ impl Worker {
         let wake = self.wake_handle();
         self.send(Update::DiagnosisProgress("starting".into()));
         std::thread::spawn(move || {
+            background_priority();
             let progress_tx = std::sync::Mutex::new(tx.clone());
             let progress_wake = wake.clone();
             let progress = move |msg: &str| {
