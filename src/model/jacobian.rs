@@ -102,9 +102,10 @@ impl PrefixSums {
 }
 
 /// Rows per chunk (at least) of [`Model::prefix_sweep_chunked`]: a
-/// 30-minute ride at 100 Hz is six chunks, a 10-minute ride two, and the
-/// real drives of `../shared/real` (at most 12,000 rows) one. Unit tests use
-/// short chunks so that their short rides exercise the chaining.
+/// 10-minute ride at 100 Hz is six chunks, 30 minutes or more sixteen
+/// ([`MAX_PREFIX_CHUNKS`]), and rides under 20,000 rows (the real drives of
+/// `../shared/real` have at most 12,000) one. Unit tests use short chunks so
+/// that their short rides exercise the chaining.
 pub(crate) const PREFIX_CHUNK_ROWS: usize = if cfg!(test) { 300 } else { 10_000 };
 /// At most this many chunks: each holds the sums of every parameter (a
 /// 6-hour ride's 13,000 segment biases: 1 MB a chunk).
