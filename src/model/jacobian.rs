@@ -19,9 +19,9 @@
 use nalgebra::{DMatrix, DVector, Matrix3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 
-use super::Model;
 use super::observe::{WanderDerivative, Whitener};
 use super::rotation::left_jacobian;
+use super::{Anchor, Model};
 
 /// Weighted residuals, their Jacobian with respect to the free parameters, and the cost.
 #[derive(Clone, Debug)]
@@ -137,8 +137,7 @@ impl<T> Chunked<T> {
     /// Per chunk the sums of the chunks before it (see [`Self::each_with_before`]).
     pub fn befores(self, np: usize) -> Vec<PrefixSums> {
         let mut out = Vec::with_capacity(self.chunks.len());
-        let total = self.each_with_before(np, |_, before, _| out.push(before.clone()));
-        drop(total);
+        self.each_with_before(np, |_, before, _| out.push(before.clone()));
         out
     }
 }
@@ -177,6 +176,15 @@ impl Model {
     ) {
         let (first, q0, p0, mut sums) = self.prefix_start(theta, free);
         let mut visited = rows.partition_point(|&r| r < first);
+        visit_row(
+            rows,
+            &mut visited,
+            first,
+            &p0,
+            &Vector3::zeros(),
+            &sums,
+            &mut at_row,
+        );
         self.prefix_steps(
             theta,
             free,
@@ -254,28 +262,26 @@ impl Model {
                     at_row(&mut out, row, p, d, s)
                 };
                 if c == 0 {
-                    self.prefix_steps(
-                        theta,
-                        free,
-                        (first, bounds[1]),
-                        (q, p),
-                        &mut sums,
+                    visit_row(
                         rows,
                         &mut visited,
-                        &mut visit,
-                    );
-                } else {
-                    self.prefix_steps_after(
-                        theta,
-                        free,
-                        (bounds[c], bounds[c + 1]),
-                        (q, p),
-                        &mut sums,
-                        rows,
-                        &mut visited,
+                        first,
+                        &p,
+                        &Vector3::zeros(),
+                        &sums,
                         &mut visit,
                     );
                 }
+                self.prefix_steps(
+                    theta,
+                    free,
+                    (bounds[c], bounds[c + 1]),
+                    (q, p),
+                    &mut sums,
+                    rows,
+                    &mut visited,
+                    &mut visit,
+                );
                 (out, sums)
             })
             .collect();
@@ -318,10 +324,13 @@ impl Model {
     /// The row a prefix sweep starts at: the anchor's when nothing free
     /// acts before it, else 0.
     fn prefix_first(&self, theta: &[f64], free: &[bool]) -> usize {
-        match self.anchor_for(theta) {
-            Some(a) if self.anchor_holds(free) => a.row,
-            _ => 0,
-        }
+        self.prefix_anchor(theta, free).map_or(0, |a| a.row)
+    }
+
+    /// The anchor a prefix sweep starts from: the model's, while `theta`
+    /// keeps its values and nothing free acts before it.
+    fn prefix_anchor(&self, theta: &[f64], free: &[bool]) -> Option<&Anchor> {
+        self.anchor_for(theta).filter(|_| self.anchor_holds(free))
     }
 
     /// Where a prefix sweep starts at `theta` over the `free` parameters: the
@@ -334,9 +343,9 @@ impl Model {
         free: &[bool],
     ) -> (usize, UnitQuaternion<f64>, Vector3<f64>, PrefixSums) {
         let mut sums = PrefixSums::new(self.n_params());
-        let (first, q0, p0, phi) = match self.anchor_for(theta) {
-            Some(a) if self.anchor_holds(free) => (a.row, a.q, a.p, Vector3::zeros()),
-            _ => {
+        let (first, q0, p0, phi) = match self.prefix_anchor(theta, free) {
+            Some(a) => (a.row, a.q, a.p, Vector3::zeros()),
+            None => {
                 let (q, p, phi) = self.initial_state(theta);
                 (0, q, p, phi)
             }
@@ -377,7 +386,8 @@ impl Model {
         let sig = &self.signals;
         let (f, _) = self.forward_axis(theta);
         let inc = self.spec.increment;
-        let ends: Vec<(UnitQuaternion<f64>, Vector3<f64>)> = bounds
+        // The last chunk's own end is no chunk's start.
+        let ends: Vec<(UnitQuaternion<f64>, Vector3<f64>)> = bounds[..bounds.len() - 1]
             .windows(2)
             .collect::<Vec<_>>()
             .into_par_iter()
@@ -396,38 +406,21 @@ impl Model {
             .collect();
         debug_assert_eq!(bounds.first(), Some(&first));
         let (mut q, mut p) = (q0, p0);
-        let mut out = Vec::with_capacity(ends.len());
+        let mut out = Vec::with_capacity(ends.len() + 1);
         for (r, s) in ends {
             out.push((q, p));
             p += q * s;
             q *= r;
         }
+        out.push((q, p));
         out
-    }
-
-    /// The start row `from` (visited) and then the steps `from + 1 ..= to`
-    /// (see [`Model::prefix_steps_after`]).
-    #[allow(clippy::too_many_arguments)]
-    fn prefix_steps(
-        &self,
-        theta: &[f64],
-        free: &[bool],
-        (from, to): (usize, usize),
-        (q, p): (UnitQuaternion<f64>, Vector3<f64>),
-        sums: &mut PrefixSums,
-        rows: &[usize],
-        visited: &mut usize,
-        at_row: &mut impl FnMut(usize, &Vector3<f64>, &Vector3<f64>, &PrefixSums),
-    ) {
-        visit_row(rows, visited, from, &p, &Vector3::zeros(), sums, at_row);
-        self.prefix_steps_after(theta, free, (from, to), (q, p), sums, rows, visited, at_row);
     }
 
     /// Steps `from + 1 ..= to` from the attitude `q` and position `p` at row
     /// `from`, adding each step's increments to `sums` and calling `at_row`
     /// at the rows of `rows` from index `visited` on (once per row).
     #[allow(clippy::too_many_arguments)]
-    fn prefix_steps_after(
+    fn prefix_steps(
         &self,
         theta: &[f64],
         free: &[bool],

@@ -128,7 +128,7 @@ impl Model {
         for span in &spans {
             let (_, tail) = std::mem::take(&mut rest).split_at_mut(span.start - at);
             let (own, tail) = tail.split_at_mut(span.len());
-            slices.push(Some((span.start, own)));
+            slices.push(Some((span.start, span.start, own)));
             (rest, at) = (tail, span.end);
         }
         let slices = std::sync::Mutex::new(slices);
@@ -143,15 +143,15 @@ impl Model {
                     .ok()
                     .and_then(|mut s| s.get_mut(c).and_then(Option::take))
             },
-            |out: &mut Option<(usize, &mut [[f64; 4]])>, row, p, _, sums| {
-                let Some((start, out)) = out else { return };
-                let mut k = rows.partition_point(|&r| r < row);
-                while k < rows.len() && rows[k] == row {
+            // (first row index of the chunk, the next one to write, its rows)
+            |out: &mut Option<(usize, usize, &mut [[f64; 4]])>, row, p, _, sums| {
+                let Some((start, k, out)) = out else { return };
+                while *k < rows.len() && rows[*k] == row {
                     let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
-                    if let Some(slot) = out.get_mut(k - *start) {
+                    if let Some(slot) = out.get_mut(*k - *start) {
                         *slot = c.map(|v| v * widen);
                     }
-                    k += 1;
+                    *k += 1;
                 }
             },
         );
