@@ -395,10 +395,9 @@ fn estimate_on(
     let observed: usize = parts.iter().map(|m| m.observed_fixes()).sum();
     let side_by_side = observed <= SIDE_BY_SIDE_FIXES;
     let mut x = x0;
-    let mut value = at(x);
-    if !value.is_finite() {
-        return None;
-    }
+    // `-2 ln L` at `x`: the start's evaluated beside the first search's
+    // first stencil (one round of evaluations fewer).
+    let mut value: Option<f64> = None;
     let mut limit = [Limit::None; SETTINGS];
     let (mut below, mut above) = ([f64::INFINITY; SETTINGS], [f64::INFINITY; SETTINGS]);
     for block in blocks.iter().filter(|b| !b.is_empty()) {
@@ -428,13 +427,20 @@ fn estimate_on(
             &log_bounds,
             MAX_NEWTON_ITERATIONS,
         );
+        if !found.value.is_finite() {
+            return None;
+        }
         x = place(&found.x);
-        value = found.value;
+        value = Some(found.value);
         for (i, &d) in block.iter().enumerate() {
             limit[d] = found.limit[i];
             below[d] = found.below[i];
             above[d] = found.above[i];
         }
+    }
+    let value = value.unwrap_or_else(|| at(x));
+    if !value.is_finite() {
+        return None;
     }
     // The heights' block measured the ratio with the horizontal sigma held,
     // i.e. the heights' own wander in metres; the ratio is that over the
@@ -641,7 +647,7 @@ mod tests {
         assert!(serde_json::from_str::<Limit>("\"sideways\"").is_err());
     }
 
-    use super::search::NEWTON_DONE;
+    use super::search::{Found, NEWTON_DONE};
     use super::*;
 
     /// A long ride's noise is estimated on windows of it: on a simulated
@@ -718,7 +724,13 @@ mod tests {
                 side_by_side,
             };
             let wide = [(-5.0, 5.0); 2];
-            let found = newton(objective, &[0.0, 0.0], quadratic(&[0.0, 0.0]), &wide, 8);
+            let found = newton(
+                objective,
+                &[0.0, 0.0],
+                Some(quadratic(&[0.0, 0.0])),
+                &wide,
+                8,
+            );
             assert!(
                 (found.x[0] - 0.4).abs() < 1e-6 && (found.x[1] + 0.8).abs() < 1e-6,
                 "{:?}",
@@ -736,6 +748,90 @@ mod tests {
         }
     }
 
+    /// A skewed three-setting surface with a curved valley (not quadratic,
+    /// so the search takes several rounds, a longer line point and the
+    /// ranges' extra points).
+    fn valley(x: &[f64]) -> f64 {
+        let u = x[0] - 0.3 * x[1] * x[1];
+        8.0 * u * u
+            + (x[1] - 1.2).powi(2)
+            + 0.4 * (x[1] - 1.2).powi(4)
+            + 5.0 * (x[2] + 0.3).powi(2)
+            + x[0] * x[2]
+    }
+
+    #[test]
+    fn side_by_side_rounds_change_no_value_the_search_finds() {
+        // One at a time (no idle cores to fill, no spare points) and side by
+        // side (the start beside the first stencil, spare points in idle
+        // cores): the same points asked for, so the same search, bit for bit.
+        let found: Vec<(Found, usize)> = [false, true]
+            .into_iter()
+            .map(|side_by_side| {
+                let calls = AtomicUsize::new(0);
+                let f = |x: &[f64]| {
+                    calls.fetch_add(1, Ordering::Relaxed);
+                    valley(x)
+                };
+                let found = newton(
+                    Objective {
+                        f: &f,
+                        side_by_side,
+                    },
+                    &[-1.0, -0.5, 0.8],
+                    None,
+                    &[(-6.0, 6.0); 3],
+                    20,
+                );
+                (found, calls.into_inner())
+            })
+            .collect();
+        let ((one, alone), (both, beside)) = (&found[0], &found[1]);
+        assert_eq!(one.x, both.x);
+        assert_eq!(one.value.to_bits(), both.value.to_bits());
+        assert_eq!(one.below, both.below);
+        assert_eq!(one.above, both.above);
+        assert!(one.value < valley(&[-1.0, -0.5, 0.8]) - 1.0, "{one:?}");
+        // A repeated point is never evaluated twice; side by side spends at
+        // most a spare point per round of evaluations, and only where one
+        // core would wait.
+        assert!(*alone >= 20 && beside >= alone, "{alone} {beside}");
+        assert!(beside - alone <= 10, "{alone} {beside}");
+    }
+
+    #[test]
+    fn a_point_asked_for_again_is_not_evaluated_again() {
+        let calls = AtomicUsize::new(0);
+        let f = |x: &[f64]| {
+            calls.fetch_add(1, Ordering::Relaxed);
+            x[0] * x[0]
+        };
+        let objective = Objective {
+            f: &f,
+            side_by_side: true,
+        };
+        let mut known = search::Known::new();
+        let a = known.values(&objective, &[vec![1.0], vec![2.0], vec![1.0]], &[]);
+        assert_eq!(a, vec![1.0, 4.0, 1.0]);
+        assert_eq!(calls.load(Ordering::Relaxed), 2);
+        // Three new points on two cores leave one idle: a spare fills it
+        // (and is known afterwards); on one core none would.
+        let idle = {
+            let cores = rayon::current_num_threads().max(1);
+            (cores - 3 % cores) % cores
+        };
+        let spare = [vec![5.0], vec![6.0]];
+        let b = known.values(
+            &objective,
+            &[vec![2.0], vec![3.0], vec![4.0], vec![7.0]],
+            &spare,
+        );
+        assert_eq!(b, vec![4.0, 9.0, 16.0, 49.0]);
+        assert_eq!(calls.load(Ordering::Relaxed), 5 + idle.min(2));
+        assert_eq!(known.at(&objective, &[5.0]), 25.0);
+        assert_eq!(calls.load(Ordering::Relaxed), 5 + idle.clamp(1, 2));
+    }
+
     #[test]
     fn newton_holds_a_setting_the_likelihood_pushes_past_its_bound() {
         // The minimum at x1 = -0.8 lies below a bound at -0.5: x1 is held
@@ -745,7 +841,13 @@ mod tests {
             side_by_side: true,
         };
         let bounds = [(-5.0, 5.0), (-0.5, 5.0)];
-        let found = newton(objective, &[0.0, 1.0], quadratic(&[0.0, 1.0]), &bounds, 8);
+        let found = newton(
+            objective,
+            &[0.0, 1.0],
+            Some(quadratic(&[0.0, 1.0])),
+            &bounds,
+            8,
+        );
         assert_eq!(found.limit, vec![Limit::None, Limit::AtMost]);
         assert_eq!(found.x[1], -0.5);
         assert!((found.x[0] - 0.25).abs() < 1e-3, "{:?}", found.x);
@@ -766,7 +868,13 @@ mod tests {
             f: &f,
             side_by_side: true,
         };
-        let found = newton(objective, &[0.0, 0.0], f(&[0.0, 0.0]), &[(-8.0, 8.0); 2], 8);
+        let found = newton(
+            objective,
+            &[0.0, 0.0],
+            Some(f(&[0.0, 0.0])),
+            &[(-8.0, 8.0); 2],
+            8,
+        );
         // Within the stopping rule's step.
         assert!(
             (found.x[0] - 9f64.ln()).abs() < NEWTON_DONE,
@@ -807,7 +915,7 @@ mod tests {
             side_by_side: true,
         };
         let start = [0.02, 0.05];
-        let found = newton(objective, &start, f(&start), &[(-0.3, 0.3); 2], 8);
+        let found = newton(objective, &start, Some(f(&start)), &[(-0.3, 0.3); 2], 8);
         // Marginal covariance su^2 u u^T + sv^2 v v^T.
         let want = [
             (su * su * 0.8 + sv * sv * 0.2).sqrt(),
@@ -834,7 +942,7 @@ mod tests {
         let found = newton(
             objective,
             &[0.0, 0.02],
-            f(&[0.0, 0.02]),
+            Some(f(&[0.0, 0.02])),
             &[(-3.0, 3.0); 2],
             8,
         );

@@ -80,6 +80,112 @@ impl Objective<'_> {
     }
 }
 
+/// The values a [`newton`] search has evaluated, by point (the bits of its
+/// coordinates), so that a point asked for again costs nothing; and the
+/// spare cores of a round of evaluations put to points likely asked for
+/// next. Evaluations side by side run in rounds of as many as there are
+/// cores: a stencil of nine on two cores leaves one core idle for its last
+/// round, and so do the start's value alone, a single longer line point
+/// and the ranges' `f_ij--` points after the search (on a 30-minute ride
+/// 36 such rounds for 62 likelihoods). A value is the same whenever it is
+/// computed, so what the search finds does not change, only how many
+/// rounds it waits for.
+pub(super) struct Known {
+    values: std::collections::HashMap<Vec<u64>, f64>,
+}
+
+impl Known {
+    pub(super) fn new() -> Self {
+        Self {
+            values: std::collections::HashMap::new(),
+        }
+    }
+
+    fn key(x: &[f64]) -> Vec<u64> {
+        x.iter().map(|v| v.to_bits()).collect()
+    }
+
+    /// `f` at each of `points`: those not yet known evaluated side by side
+    /// (see [`Objective::values`]), with as many of `spare` as fill the
+    /// cores that round would leave idle.
+    pub(super) fn values(
+        &mut self,
+        f: &Objective,
+        points: &[Vec<f64>],
+        spare: &[Vec<f64>],
+    ) -> Vec<f64> {
+        let mut missing: Vec<Vec<f64>> = Vec::new();
+        for p in points {
+            if !self.values.contains_key(&Self::key(p)) && !missing.contains(p) {
+                missing.push(p.clone());
+            }
+        }
+        if f.side_by_side && !missing.is_empty() {
+            let cores = rayon::current_num_threads().max(1);
+            let idle = (cores - missing.len() % cores) % cores;
+            let extra: Vec<Vec<f64>> = spare
+                .iter()
+                .filter(|p| !self.values.contains_key(&Self::key(p)) && !missing.contains(p))
+                .take(idle)
+                .cloned()
+                .collect();
+            missing.extend(extra);
+        }
+        for (p, v) in missing.iter().zip(f.values(&missing)) {
+            self.values.insert(Self::key(p), v);
+        }
+        points
+            .iter()
+            .map(|p| self.values.get(&Self::key(p)).copied().unwrap_or(f64::NAN))
+            .collect()
+    }
+
+    pub(super) fn at(&mut self, f: &Objective, x: &[f64]) -> f64 {
+        self.values(f, &[x.to_vec()], &[])[0]
+    }
+}
+
+/// The points of [`newton`]'s finite-difference stencil at `x` over the
+/// coordinates `free` (step `h`): `x + h e_i`, `x - h e_i` for each, then
+/// `x + h e_i + h e_j` for each pair `j < i`.
+fn stencil_points(x: &[f64], free: &[usize], h: f64) -> Vec<Vec<f64>> {
+    let m = free.len();
+    let moved = |moves: &[(usize, f64)]| {
+        let mut y = x.to_vec();
+        for &(d, s) in moves {
+            y[free[d]] += s;
+        }
+        y
+    };
+    let mut points = Vec::with_capacity(2 * m + m * (m - 1) / 2);
+    for i in 0..m {
+        points.push(moved(&[(i, h)]));
+        points.push(moved(&[(i, -h)]));
+    }
+    for i in 0..m {
+        for j in 0..i {
+            points.push(moved(&[(i, h), (j, h)]));
+        }
+    }
+    points
+}
+
+/// The `x - h e_i - h e_j` points (pairs `j < i`) that
+/// [`Stencil::symmetric_hessian`] adds to the stencil at `x`.
+fn minus_minus_points(x: &[f64], free: &[usize], h: f64) -> Vec<Vec<f64>> {
+    let m = free.len();
+    let mut points = Vec::with_capacity(m * (m - 1) / 2);
+    for i in 0..m {
+        for j in 0..i {
+            let mut y = x.to_vec();
+            y[free[i]] -= h;
+            y[free[j]] -= h;
+            points.push(y);
+        }
+    }
+    points
+}
+
 /// Where a [`newton`] search ended: the minimum `x` (a coordinate the
 /// likelihood pushed against a bound held there, `limit` saying which side),
 /// `f` there, and how far below and above `x` each log-setting's 1-sigma
@@ -141,15 +247,18 @@ pub(super) const NEWTON_GAIN: f64 = 0.2;
 pub(super) fn newton(
     f: Objective,
     x0: &[f64],
-    f0: f64,
+    f0: Option<f64>,
     bounds: &[(f64, f64)],
     max_iter: usize,
 ) -> Found {
     let n = x0.len();
     let h = HESSIAN_STEP;
     let inside = |d: usize, v: f64| v.clamp(bounds[d].0 + h, bounds[d].1 - h);
+    let mut known = Known::new();
     let mut x: Vec<f64> = (0..n).map(|d| inside(d, x0[d])).collect();
-    let mut value = if x == x0 { f0 } else { f.at(&x) };
+    // Where not given, evaluated beside the first stencil.
+    let mut value = f0.filter(|_| x == x0).unwrap_or(f64::NAN);
+    let mut value_known = f0.is_some() && x == x0;
     let mut limit = vec![Limit::None; n];
     let (mut below, mut above) = (vec![f64::INFINITY; n], vec![f64::INFINITY; n]);
     let mut last: Option<Stencil> = None;
@@ -159,24 +268,17 @@ pub(super) fn newton(
         if m == 0 {
             break;
         }
-        let moved = |moves: &[(usize, f64)]| {
-            let mut y = x.clone();
-            for &(d, s) in moves {
-                y[free[d]] += s;
-            }
-            y
-        };
-        let mut points = Vec::with_capacity(2 * m + m * (m - 1) / 2);
-        for i in 0..m {
-            points.push(moved(&[(i, h)]));
-            points.push(moved(&[(i, -h)]));
+        let points = stencil_points(&x, &free, h);
+        // The centre (where not yet known) evaluated beside the stencil,
+        // and in an idle core the ranges' points, in case this stencil is
+        // the last.
+        let centre = (!value_known).then(|| x.clone());
+        let asked: Vec<Vec<f64>> = points.iter().cloned().chain(centre).collect();
+        let mut values = known.values(&f, &asked, &minus_minus_points(&x, &free, h));
+        if !value_known {
+            value = values.pop().unwrap_or(f64::NAN);
+            value_known = true;
         }
-        for i in 0..m {
-            for j in 0..i {
-                points.push(moved(&[(i, h), (j, h)]));
-            }
-        }
-        let values = f.values(&points);
         let plus = |i: usize| values[2 * i];
         let mut pair = values[2 * m..].iter();
         let mut gradient = DVector::<f64>::zeros(m);
@@ -236,7 +338,8 @@ pub(super) fn newton(
             }
         }
         if held {
-            value = f.at(&x);
+            // Evaluated beside the next stencil.
+            value_known = false;
             continue;
         }
         let target = |fraction: f64| -> Vec<f64> {
@@ -264,15 +367,18 @@ pub(super) fn newton(
         // is best (on a 30-minute ride 4 rounds of 5, Berlin 4 of 6), and
         // the third point side by side cost a second round each time.
         let mut tried = vec![full, target(2.0)];
-        let mut tried_values = f.values(&tried);
+        let mut tried_values = known.values(&f, &tried, &[]);
         if tried_values[1] < tried_values[0] {
+            // Beside it, where a core is idle, the stencil the search takes
+            // next if twice the step stays best.
             let further = target(4.0);
-            tried_values.push(f.at(&further));
+            let next = stencil_points(&tried[1], &free, h);
+            tried_values.push(known.values(&f, std::slice::from_ref(&further), &next)[0]);
             tried.push(further);
         }
         if tried_values.iter().all(|v| v.is_nan() || *v >= value) {
             tried = vec![target(0.5), target(0.25)];
-            tried_values = f.values(&tried);
+            tried_values = known.values(&f, &tried, &[]);
         }
         let best = (0..tried.len()).min_by(|&a, &b| tried_values[a].total_cmp(&tried_values[b]));
         match best {
@@ -295,8 +401,11 @@ pub(super) fn newton(
             _ => break,
         }
     }
+    if !value_known {
+        value = known.at(&f, &x);
+    }
     if let Some(stencil) = last {
-        let hess = stencil.symmetric_hessian(&f, h);
+        let hess = stencil.symmetric_hessian(&f, &mut known, h);
         for (i, (b, a)) in stencil
             .ranges(&f, &hess, &x, value, bounds)
             .into_iter()
@@ -337,18 +446,15 @@ impl Stencil {
     /// `sigma^2 / tau`, the forward cross term made the Hessian indefinite,
     /// and the ranges fell back to each setting's curvature with the others
     /// held: 2.54-2.59 m where the likelihood allows about 2.4-2.7 m.
-    pub(super) fn symmetric_hessian(&self, f: &Objective, h: f64) -> DMatrix<f64> {
+    pub(super) fn symmetric_hessian(
+        &self,
+        f: &Objective,
+        known: &mut Known,
+        h: f64,
+    ) -> DMatrix<f64> {
         let m = self.free.len();
-        let mut points = Vec::with_capacity(m * (m - 1) / 2);
-        for i in 0..m {
-            for j in 0..i {
-                let mut y = self.centre.clone();
-                y[self.free[i]] -= h;
-                y[self.free[j]] -= h;
-                points.push(y);
-            }
-        }
-        let minus_minus = f.values(&points);
+        let points = minus_minus_points(&self.centre, &self.free, h);
+        let minus_minus = known.values(f, &points, &[]);
         // f_i+ + f_i- per coordinate.
         let both = |i: usize| self.values[2 * i] + self.values[2 * i + 1];
         let mut hess = self.hess.clone();
