@@ -198,7 +198,7 @@ fn the_clock_is_the_same_whichever_distance_is_read() {
 /// fixes and speed arrive about 0.1 s late (the lag the CAN fit's `gps_lag`
 /// measures, 0.096 s); on this straight minute nothing but the reference can
 /// see a lag both share, so the path is late with them (measured: 1.64 m
-/// against 1.24 m with the CAN speed; the fixes 1.50 m).
+/// against 1.25 m with the CAN speed; the fixes 1.50 m).
 #[test]
 fn without_the_can_speed_the_gnss_speed_gives_the_distance() {
     let options = ImportOptions {

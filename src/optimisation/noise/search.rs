@@ -226,13 +226,21 @@ pub(super) const NEWTON_GAIN: f64 = 0.2;
 /// coordinate, tried at 1 and 2 times its length side by side (and at 4
 /// where 2 beat 1), and at a half and a quarter if none of those lowers
 /// `f`. It stops after a step that gains less than [`NEWTON_GAIN`] where
-/// the step was below [`NEWTON_DONE`] or, the stencil curving well in
-/// every direction ([`WEAK_CURVATURE`]), the quadratic model, too, expected
+/// the step was below [`NEWTON_DONE`] or the quadratic model, too, expected
 /// less than [`NEWTON_GAIN`]: then what is left to gain is a fraction of one unit of
 /// `-2 ln L`, a few tenths of each setting's 1-sigma (on the GPS wander's
 /// ridge `sigma^2 / tau` the steps went on back and forth by 0.1-0.17 in
 /// `ln tau`, whose 1-sigma is 0.37, for more rounds: 66 likelihoods
-/// instead of 75 on a 30-minute ride, the same estimate). Near a bound it
+/// instead of 75 on a 30-minute ride, the same estimate). The model's
+/// expectation counts whether or not the stencil curves well in every
+/// direction: along a weak one its floored curvature makes the step long
+/// and the expectation generous, so an expectation below [`NEWTON_GAIN`]
+/// there means a ridge that hardly falls, and the ranges scan it anyway
+/// ([`Stencil::ranges`]). Requiring a well-curved stencil as well cost the
+/// 30-minute ride a fourth round of eleven likelihoods for 0.04 in
+/// `-2 ln L`, and the comma drive 31 likelihoods for 0.03: the
+/// forward-difference cross terms read the `sigma^2 / tau` ridge as flatter
+/// than the last stencil's symmetric ones do. Near a bound it
 /// goes on: the next stencil decides whether the setting is held there.
 /// The last stencil, with its cross terms made second-order
 /// ([`Stencil::symmetric_hessian`]), gives the ranges: a Nelder-Mead search
@@ -307,10 +315,6 @@ pub(super) fn newton(
         });
         let eigen = hess.clone().symmetric_eigen();
         let top = eigen.eigenvalues.amax();
-        // Curved in every direction: the quadratic model's expected gain is
-        // a guide (along a weak one, such as a ridge towards a bound, it is
-        // not; see `Stencil::ranges`).
-        let curved = eigen.eigenvalues.min() >= WEAK_CURVATURE;
         let floor = (1e-3 * top).max(0.5);
         let inverse_gradient = eigen.eigenvectors.transpose() * &gradient;
         let scaled = DVector::from_iterator(
@@ -393,7 +397,7 @@ pub(super) fn newton(
                     .iter()
                     .any(|&d| x[d] <= bounds[d].0 + 2.0 * h || x[d] >= bounds[d].1 - 2.0 * h);
                 if gain < NEWTON_GAIN
-                    && (step_size < NEWTON_DONE || (curved && !at_edge && expected < NEWTON_GAIN))
+                    && (step_size < NEWTON_DONE || (!at_edge && expected < NEWTON_GAIN))
                 {
                     break;
                 }
