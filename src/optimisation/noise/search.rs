@@ -140,6 +140,11 @@ impl Known {
             .collect()
     }
 
+    /// `value` taken as `f` at `x` (a value the caller already has).
+    fn insert(&mut self, x: &[f64], value: f64) {
+        self.values.insert(Self::key(x), value);
+    }
+
     pub(super) fn at(&mut self, f: &Objective, x: &[f64]) -> f64 {
         self.values(f, &[x.to_vec()], &[])[0]
     }
@@ -263,10 +268,10 @@ pub(super) fn newton(
     let h = HESSIAN_STEP;
     let inside = |d: usize, v: f64| v.clamp(bounds[d].0 + h, bounds[d].1 - h);
     let mut known = Known::new();
+    if let Some(v) = f0 {
+        known.insert(x0, v);
+    }
     let mut x: Vec<f64> = (0..n).map(|d| inside(d, x0[d])).collect();
-    // Where not given, evaluated beside the first stencil.
-    let mut value = f0.filter(|_| x == x0).unwrap_or(f64::NAN);
-    let mut value_known = f0.is_some() && x == x0;
     let mut limit = vec![Limit::None; n];
     let (mut below, mut above) = (vec![f64::INFINITY; n], vec![f64::INFINITY; n]);
     let mut last: Option<Stencil> = None;
@@ -277,16 +282,12 @@ pub(super) fn newton(
             break;
         }
         let points = stencil_points(&x, &free, h);
-        // The centre (where not yet known) evaluated beside the stencil,
-        // and in an idle core the ranges' points, in case this stencil is
-        // the last.
-        let centre = (!value_known).then(|| x.clone());
-        let asked: Vec<Vec<f64>> = points.iter().cloned().chain(centre).collect();
+        // The centre (the start where not given, a setting just held at its
+        // bound) evaluated beside the stencil where not yet known, and in an
+        // idle core the ranges' points, in case this stencil is the last.
+        let asked: Vec<Vec<f64>> = points.iter().cloned().chain([x.clone()]).collect();
         let mut values = known.values(&f, &asked, &minus_minus_points(&x, &free, h));
-        if !value_known {
-            value = values.pop().unwrap_or(f64::NAN);
-            value_known = true;
-        }
+        let value = values.pop().unwrap_or(f64::NAN);
         let plus = |i: usize| values[2 * i];
         let mut pair = values[2 * m..].iter();
         let mut gradient = DVector::<f64>::zeros(m);
@@ -342,8 +343,6 @@ pub(super) fn newton(
             }
         }
         if held {
-            // Evaluated beside the next stencil.
-            value_known = false;
             continue;
         }
         let target = |fraction: f64| -> Vec<f64> {
@@ -389,7 +388,6 @@ pub(super) fn newton(
             Some(b) if tried_values[b] < value => {
                 let step_size = size(&tried[b]);
                 let gain = value - tried_values[b];
-                value = tried_values[b];
                 x = tried.swap_remove(b);
                 // Near a bound (where a setting is held at it), the next
                 // stencil decides whether it goes there ("at least", "at most").
@@ -405,9 +403,7 @@ pub(super) fn newton(
             _ => break,
         }
     }
-    if !value_known {
-        value = known.at(&f, &x);
-    }
+    let value = known.at(&f, &x);
     if let Some(stencil) = last {
         let hess = stencil.symmetric_hessian(&f, &mut known, h);
         for (i, (b, a)) in stencil
