@@ -367,7 +367,8 @@ impl Reconstruction {
     }
 
     /// This fit's step 2 ends on its second or a later LM step that met its
-    /// quadratic model (`lm::iterate`'s `near_enough`), not on the step
+    /// quadratic model (`lm::iterate`'s `near_enough`, under the fit's own
+    /// tolerance, not a step-1 window's looser one), not on the step
     /// after it that only confirms: for a refit that starts next to its
     /// optimum and is needed only near it, as a validation fold's is. There
     /// the cost is quadratic to the digits and the confirming step gains a
@@ -666,10 +667,12 @@ impl Reconstruction {
                 _ => &self.model,
             };
             // A window that will be widened only has to bring the fit into the
-            // right basin; the next window refines it.
-            let near_enough = matches!((&self.window, phase), (Some(_), Phase::Step1))
+            // right basin; the next window refines it. A refit that ends on a
+            // met model keeps its own tolerance for both tests.
+            let window = matches!((&self.window, phase), (Some(_), Phase::Step1));
+            let near_enough = window
                 || (phase == Phase::Step2 && self.step2_near_enough && self.stage_iterations >= 1);
-            let tol = if near_enough {
+            let tol = if window {
                 tol.max(WINDOW_TOLERANCE)
             } else {
                 tol
