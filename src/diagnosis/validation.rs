@@ -521,8 +521,10 @@ mod tests {
     /// A fold's refit that ends on its second step that met its model
     /// (`Reconstruction::ending_on_a_met_model`) saves the confirming
     /// iteration and predicts the withheld fixes as the refit run to its
-    /// tolerance does: to a millimetre (a refit that ended on its first step
-    /// moved the held-out error of a 20-minute ride by 5 mm).
+    /// tolerance does: to a millimetre. (With a step-1 window's looser
+    /// tolerance, a first version of it ended on the first step and moved
+    /// the held-out error of this ride by 5 mm: the iteration count here
+    /// fails on that.)
     #[test]
     fn a_fold_that_ends_on_a_met_model_predicts_as_the_converged_one() {
         let sig = Arc::new(crate::testing::simulated_signals(3, 1200.0, &[]));
