@@ -20,7 +20,7 @@ pub use ranking::{
 pub use reference::{ErrorStats, ReferenceComparison, ReferenceError};
 pub use residuals::{FixResidual, NormalisedSpread, ResidualRms, fix_residuals, rms_per_minute};
 pub use structure::{Correlation, structure};
-pub use validation::{Folds, HeldOut, HeldOutRms, held_out, held_out_rms};
+pub use validation::{Folds, HeldOut, HeldOutRms, held_out, held_out_from, held_out_rms};
 pub use view::FitView;
 pub use whiteness::{Whiteness, whiteness};
 

@@ -61,13 +61,13 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::validation::{ErrorLaw, Folds, HeldOut, comparable_fixes, fix_errors, held_out};
+use super::validation::{ErrorLaw, Folds, HeldOut, comparable_fixes, fix_errors, held_out_from};
 use super::{ResidualRms, fix_residuals};
 use crate::effects::{self, Role};
 use crate::import::reference::ReferenceTrack;
 use crate::model::damped_solve;
 use crate::model::{Model, ModelSpec};
-use crate::optimisation::{FitError, FitSettings, Reconstruction};
+use crate::optimisation::{FitError, FitSettings, Linearised, Reconstruction};
 use crate::signals::Signals;
 
 /// The significance rule (see the module documentation) for a paired `t`
@@ -243,11 +243,14 @@ pub fn diagnose_against(
     // the model is fitted under it from the start: estimating the ride's own
     // noise first would only be refitted away (a 20-minute ride's diagnosis
     // took 3.4 times its fit with that detour).
-    let mut fit = Reconstruction::new(signals, ranking_settings(settings))?;
+    let mut fit =
+        Reconstruction::new(signals, ranking_settings(settings))?.keeping_its_last_linearisation();
     fit.finish();
-    diagnose_fitted_against(
+    let start = fit.take_last_linearisation();
+    rank(
         fit.model(),
         fit.params(),
+        start,
         settings,
         folds,
         reference,
@@ -294,6 +297,21 @@ pub fn diagnose_fitted_against(
     reference: Option<Against>,
     progress: &(dyn Fn(&str) + Sync),
 ) -> Result<Diagnosis, FitError> {
+    rank(model, theta, None, settings, folds, reference, progress)
+}
+
+/// [`diagnose_fitted_against`], where the fit at `theta` may have kept
+/// the linearisation its last iteration made (see
+/// [`Reconstruction::keeping_its_last_linearisation`]).
+fn rank(
+    model: &Model,
+    theta: &[f64],
+    start: Option<Linearised>,
+    settings: &FitSettings,
+    folds: &Folds,
+    reference: Option<Against>,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<Diagnosis, FitError> {
     let user = settings;
     let settings = &ranking_settings(settings);
     let set = ModelSpec {
@@ -313,21 +331,23 @@ pub fn diagnose_fitted_against(
         }
     });
     let refitted;
-    let (model, theta) = if set == model.spec {
-        (model, theta)
+    let (model, theta, start) = if set == model.spec {
+        (model, theta, start)
     } else {
         progress("refitting with the noise as set");
         let m = Model::with_start(model.signals.clone(), set, model.start.clone())?;
         let t = m.carry_over(model, theta);
-        let mut fit = Reconstruction::resume(m, t, settings.clone())?;
+        let mut fit =
+            Reconstruction::resume(m, t, settings.clone())?.keeping_its_last_linearisation();
         fit.finish();
+        let start = fit.take_last_linearisation();
         refitted = fit.into_parts();
-        (&refitted.0, &refitted.1[..])
+        (&refitted.0, &refitted.1[..], start)
     };
     let sig = &model.signals;
     let folds = &folds.for_ride(sig.duration());
     progress("held-out validation of the model");
-    let base = held_out(model, theta, settings, folds)?;
+    let base = held_out_from(model, theta, settings, folds, start)?;
     let fit_errors = fix_errors(model, theta);
     let fit_rms = rms(&fit_errors);
     let use_fix = comparable_fixes(&fit_errors);
@@ -476,7 +496,7 @@ fn candidate(
     let signals = model.signals.clone();
     let added = model.spec.clone();
     let mut resumed = match Reconstruction::resume(model, theta, settings.clone()) {
-        Ok(f) => f,
+        Ok(f) => f.keeping_its_last_linearisation(),
         Err(e) => return failed(e.to_string()),
     };
     resumed.finish();
@@ -486,16 +506,18 @@ fn candidate(
     // two-step fit from the start guess, and the better fit is kept.
     let poor = resumed.stats().rms_horizontal_m > 2.0 * full_settings.model.sigma_horizontal_m;
     let fresh = poor.then(|| {
-        Reconstruction::new(signals.clone(), full_settings).map(|mut f| {
+        Reconstruction::new(signals.clone(), full_settings).map(|f| {
+            let mut f = f.keeping_its_last_linearisation();
             f.finish();
             f
         })
     });
-    let fit = match fresh {
+    let mut fit = match fresh {
         Some(Ok(f)) if f.stats().cost < resumed.stats().cost => f,
         _ => resumed,
     };
-    let ho = match held_out(fit.model(), fit.params(), &settings, folds) {
+    let start = fit.take_last_linearisation();
+    let ho = match held_out_from(fit.model(), fit.params(), &settings, folds, start) {
         Ok(h) => h,
         Err(e) => return failed(e.to_string()),
     };

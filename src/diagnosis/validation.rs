@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use crate::effects::Role;
 use crate::model::Model;
-use crate::optimisation::{FitError, FitSettings, Reconstruction};
+use crate::optimisation::{FitError, FitSettings, Linearised, Reconstruction};
 
 /// How fixes are grouped for validation.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -393,6 +393,24 @@ pub fn held_out(
     settings: &FitSettings,
     folds: &Folds,
 ) -> Result<HeldOut, FitError> {
+    held_out_from(model, theta, settings, folds, None)
+}
+
+/// [`held_out`], its folds started from `start` where it is given and
+/// fits: the chain system that the fit's own last iteration made of the
+/// whole ride (over step 2's parameters) and the point it made it at, within
+/// the fit's tolerance of `theta` (see
+/// `Reconstruction::keeping_its_last_linearisation`). Each fold's refit
+/// then starts there, where its first step's linearisation is already
+/// made, instead of at `theta` after a sweep of the ride to linearise it
+/// again.
+pub fn held_out_from(
+    model: &Model,
+    theta: &[f64],
+    settings: &FitSettings,
+    folds: &Folds,
+    start: Option<Linearised>,
+) -> Result<HeldOut, FitError> {
     let sig = &model.signals;
     let t0 = sig.t[0];
     let settings = &validation_settings(settings);
@@ -407,12 +425,16 @@ pub fn held_out(
     // iteration (its own fixes picked out, `Model::chain_system_within`),
     // instead of a sweep of the ride per fold. Not on long rides, whose
     // validation holds one refit's memory at a time.
-    let shared = (!long)
-        .then(|| {
-            let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-            model.chain_system(theta, &free)
-        })
-        .flatten();
+    let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+    let given = start.filter(|s| {
+        s.theta.len() == theta.len() && s.system.columns() == crate::model::free_columns(&free)
+    });
+    let (origin, shared) = match given {
+        _ if long => (None, None),
+        Some(s) => (Some(s.theta), Some(s.system)),
+        None => (None, model.chain_system(theta, &free)),
+    };
+    let theta = origin.as_deref().unwrap_or(theta);
     let refit_all = || -> Vec<Result<FoldResult, FitError>> {
         (0..folds.k)
             .into_par_iter()
@@ -571,6 +593,49 @@ mod tests {
             .map(|(a, b)| (a - b).abs())
             .fold(0.0, f64::max);
         assert!(worst < 1e-3, "withheld fixes predicted {worst} m apart");
+    }
+
+    /// The linearisation a fit keeps is its last iteration's, made where
+    /// that (confirming) step started: within the fit's tolerance of where
+    /// it ends, not at it. Started from it, the validation's folds predict
+    /// the withheld fixes as folds started from a new linearisation at the
+    /// end do: to a millimetre. The fit's last report reads the ride's RMS
+    /// from that step's own evaluation, as a sweep of the ride would.
+    #[test]
+    fn folds_started_from_the_fits_last_linearisation_predict_as_from_its_end() {
+        let sig = Arc::new(crate::testing::simulated_signals(3, 900.0, &[]));
+        let ranking = FitSettings {
+            auto_noise: crate::optimisation::AutoNoise::OFF,
+            ..FitSettings::default()
+        };
+        let mut fit = Reconstruction::new(sig.clone(), ranking)
+            .expect("fit")
+            .keeping_its_last_linearisation();
+        fit.finish();
+        let kept = fit.take_last_linearisation().expect("a kept linearisation");
+        assert!(fit.take_last_linearisation().is_none());
+        let (model, theta) = (fit.model(), fit.params());
+        let last = fit.history().last().expect("iterations");
+        assert_eq!(last.ride_rms_m, fit.stats().rms_horizontal_m);
+        let (at_kept, at_end) = (model.cost(&kept.theta), model.cost(theta));
+        assert!(kept.theta != theta, "kept at the fit's end, not its last step's start");
+        assert!((kept.system.cost() - at_kept).abs() <= 1e-9 * at_kept);
+        assert!(
+            at_kept >= at_end && at_kept - at_end <= fit.settings().tolerance * at_kept,
+            "{at_kept} against {at_end}"
+        );
+        let folds = Folds::default();
+        let fresh = held_out(model, theta, fit.settings(), &folds).expect("held out");
+        let from = held_out_from(model, theta, fit.settings(), &folds, Some(kept)).expect("from");
+        let mut compared = 0;
+        for (a, b) in fresh.errors.iter().zip(&from.errors) {
+            assert_eq!(a.is_finite(), b.is_finite());
+            if a.is_finite() {
+                assert!((a - b).abs() < 1e-3, "{a} against {b} m");
+                compared += 1;
+            }
+        }
+        assert!(compared > 100, "{compared} withheld fixes");
     }
 
     #[test]

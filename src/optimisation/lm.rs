@@ -99,6 +99,17 @@ impl LinearSystem {
     }
 }
 
+/// A linearisation kept from an iteration: the chain system made at `theta`.
+///
+/// A fit's last iteration linearises the ride at the point it steps from,
+/// next to where the fit ends (within its tolerance): a validation can
+/// start its folds from there instead of linearising the ride once more.
+#[derive(Clone, Debug)]
+pub struct Linearised {
+    pub theta: Vec<f64>,
+    pub system: ChainSystem,
+}
+
 /// One LM iteration on the parameters where `free` is true, linearised as
 /// `start` where the caller has it (the model's chain system at `theta`
 /// over `free`), else here.
@@ -111,7 +122,9 @@ impl LinearSystem {
 /// the minimum of a model that holds, and what is left is about that
 /// model's error. Step 1's windows each ended on such a step's successor,
 /// which gained a few hundredths of what was asked (30-minute ride: 8 of
-/// its 34 iterations).
+/// its 34 iterations). Where `keep` is given, the iteration's chain system
+/// is left there with the point it was made at.
+#[allow(clippy::too_many_arguments)]
 pub fn iterate(
     start: Option<ChainSystem>,
     model: &Model,
@@ -120,11 +133,32 @@ pub fn iterate(
     state: &mut LmState,
     tolerance: f64,
     near_enough: bool,
+    keep: Option<&mut Option<Linearised>>,
 ) -> StepOutcome {
     let system = match start {
         Some(c) => LinearSystem::Chain(Box::new(c)),
         None => LinearSystem::of(model, theta, free),
     };
+    let from = keep.is_some().then(|| theta.to_vec());
+    let outcome = step(&system, model, theta, state, tolerance, near_enough);
+    if let Some(keep) = keep {
+        *keep = match (from, system) {
+            (Some(theta), LinearSystem::Chain(c)) => Some(Linearised { theta, system: *c }),
+            _ => None,
+        };
+    }
+    outcome
+}
+
+/// The tries of one iteration on `system`, linearised at `theta`.
+fn step(
+    system: &LinearSystem,
+    model: &Model,
+    theta: &mut [f64],
+    state: &mut LmState,
+    tolerance: f64,
+    near_enough: bool,
+) -> StepOutcome {
     let cost = system.cost();
     let entry = *state;
     let mut evaluations = 0;
@@ -203,7 +237,9 @@ mod tests {
         let mut failed = None;
         for _ in 0..200 {
             let before = state;
-            let outcome = iterate(None, &model, &mut theta, &free, &mut state, 0.0, false);
+            let outcome = iterate(
+                None, &model, &mut theta, &free, &mut state, 0.0, false, None,
+            );
             if !outcome.accepted {
                 failed = Some((before, outcome));
                 break;

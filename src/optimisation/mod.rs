@@ -34,7 +34,7 @@ use crate::model::{Evaluation, GpsTails, Model, ModelError, ModelSpec, Trajector
 use crate::signals::Signals;
 
 pub use gd::GdState;
-pub use lm::{LmState, StepOutcome};
+pub use lm::{Linearised, LmState, StepOutcome};
 pub use noise::{AutoNoise, Estimated, Limit, NoiseEstimate};
 
 /// Why a fit could not be set up.
@@ -230,6 +230,10 @@ pub struct Reconstruction {
     /// Step 2 ends on a step that met its quadratic model (see
     /// [`Reconstruction::ending_on_a_met_model`]).
     step2_near_enough: bool,
+    /// The last LM iteration's chain system of the whole ride is kept (see
+    /// [`Reconstruction::keeping_its_last_linearisation`]).
+    keeps_linearisation: bool,
+    last_linearisation: Option<Linearised>,
     gd: GdState,
     iteration: usize,
     phase_iterations: [usize; 2],
@@ -388,6 +392,25 @@ impl Reconstruction {
         self
     }
 
+    /// This fit keeps the chain system its last iteration made of the whole
+    /// ride, for [`Reconstruction::take_last_linearisation`]: a validation
+    /// that follows starts its folds from it (see
+    /// `diagnosis::validation::held_out_from`) rather than linearising the
+    /// ride again next to the same point (one sweep of the ride fewer per
+    /// validated model; on a 20-minute ride a linearisation is the price of
+    /// a fold).
+    pub fn keeping_its_last_linearisation(mut self) -> Self {
+        self.keeps_linearisation = true;
+        self
+    }
+
+    /// The chain system of the whole ride that the fit's last iteration made
+    /// and stepped from (within the fit's tolerance of where it ended), if
+    /// it keeps one and the last iteration made one.
+    pub fn take_last_linearisation(&mut self) -> Option<Linearised> {
+        self.last_linearisation.take()
+    }
+
     /// A fit of `model` at `theta`, in step 1 with no window yet.
     fn at(
         model: Model,
@@ -401,6 +424,8 @@ impl Reconstruction {
             lm: LmState::new(settings.damping),
             start_system: None,
             step2_near_enough: false,
+            keeps_linearisation: false,
+            last_linearisation: None,
             gd: GdState::new(settings.step_size),
             model,
             theta,
@@ -643,6 +668,11 @@ impl Reconstruction {
     /// One iteration of the current phase. Does nothing once the fit is done.
     pub fn iterate(&mut self) -> Option<IterationReport> {
         let phase = self.phase;
+        // Only the last iteration's is kept: a noise search (which rebuilds
+        // the model) or a window's iteration leaves none.
+        if phase != Phase::Done {
+            self.last_linearisation = None;
+        }
         let slot = match phase {
             Phase::Step1 => 0,
             Phase::Step2 => 1,
@@ -651,6 +681,9 @@ impl Reconstruction {
         };
         let free = self.mask(phase);
         let tol = self.settings.tolerance;
+        // Whether the iteration runs on the whole ride's model (not a step-1
+        // window's), so that an evaluation it makes is the ride's own.
+        let on_the_ride = !matches!((&self.window, phase), (Some(_), Phase::Step1));
         let outcome = if phase == Phase::Step2 && self.settings.method == Method::Gd {
             let scale: Vec<f64> = self
                 .model
@@ -695,6 +728,7 @@ impl Reconstruction {
                 &mut self.lm,
                 tol,
                 near_enough,
+                (self.keeps_linearisation && on_the_ride).then_some(&mut self.last_linearisation),
             )
         } else {
             let c = self.model.cost(&self.theta);
@@ -763,8 +797,9 @@ impl Reconstruction {
             };
             // A gain check cut short (a round of tails broke a physical
             // limit) ends on the Gaussian fit it set aside, not the tails'.
-            if self.phase == Phase::Done {
-                self.gaussian_back();
+            let set_aside = self.phase == Phase::Done && self.gaussian_back().is_some();
+            if set_aside {
+                self.last_linearisation = None;
             }
             // The next stage starts where this one converged: step 2 after
             // step 1's whole-ride window (which fitted the same parameters),
@@ -775,6 +810,9 @@ impl Reconstruction {
             // ride, each gaining a fifth of the one before. A step that does
             // not lower the cost still raises it.
             self.gd = GdState::new(self.settings.step_size);
+            if on_the_ride && !set_aside && outcome.evaluation.is_some() {
+                return Some(self.report_evaluated(phase, outcome));
+            }
         }
         Some(self.report(phase, outcome, stage_done))
     }
@@ -993,6 +1031,24 @@ impl Reconstruction {
     }
 
     fn report(&mut self, phase: Phase, outcome: StepOutcome, finished: bool) -> IterationReport {
+        self.report_as(phase, outcome, finished, false)
+    }
+
+    /// [`Self::report`] of a finished stage whose outcome holds the whole
+    /// ride's evaluation at the parameters it ends on: the ride's RMS is
+    /// that evaluation's, not a sweep of the ride again (a validation
+    /// fold's refit made three sweeps where two say the same).
+    fn report_evaluated(&mut self, phase: Phase, outcome: StepOutcome) -> IterationReport {
+        self.report_as(phase, outcome, true, true)
+    }
+
+    fn report_as(
+        &mut self,
+        phase: Phase,
+        outcome: StepOutcome,
+        finished: bool,
+        evaluated: bool,
+    ) -> IterationReport {
         // Over the fixes this iteration fitted (in step 1 its window, which the
         // widening may just have replaced: then over the ride).
         let rms_horizontal_m = match (outcome.evaluation, &self.window, phase) {
@@ -1004,6 +1060,7 @@ impl Reconstruction {
         let windowed = phase == Phase::Step1 && self.window.is_some();
         let ride_rms_m = match self.ride_rms_m {
             Some(r) if windowed && outcome.evaluation.is_some() && !finished => r,
+            _ if evaluated => rms_horizontal_m,
             _ if windowed || finished => FitStats::of(&self.model, &self.theta).rms_horizontal_m,
             _ => rms_horizontal_m,
         };
@@ -1046,6 +1103,7 @@ impl Reconstruction {
         if new == self.settings {
             return Ok(());
         }
+        self.last_linearisation = None;
         let effects_changed = new.model.effects != self.settings.model.effects;
         if new.auto_noise != self.settings.auto_noise {
             // Asked anew: search again (the estimate stays in force meanwhile
