@@ -618,7 +618,10 @@ mod tests {
         let last = fit.history().last().expect("iterations");
         assert_eq!(last.ride_rms_m, fit.stats().rms_horizontal_m);
         let (at_kept, at_end) = (model.cost(&kept.theta), model.cost(theta));
-        assert!(kept.theta != theta, "kept at the fit's end, not its last step's start");
+        assert!(
+            kept.theta != theta,
+            "kept at the fit's end, not its last step's start"
+        );
         assert!((kept.system.cost() - at_kept).abs() <= 1e-9 * at_kept);
         assert!(
             at_kept >= at_end && at_kept - at_end <= fit.settings().tolerance * at_kept,
