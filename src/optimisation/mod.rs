@@ -669,7 +669,8 @@ impl Reconstruction {
     pub fn iterate(&mut self) -> Option<IterationReport> {
         let phase = self.phase;
         // Only the last iteration's is kept: a noise search (which rebuilds
-        // the model) or a window's iteration leaves none.
+        // the model) or a window's iteration leaves none. A call on a done
+        // fit (as `finish` makes last) leaves the last one as it is.
         if phase != Phase::Done {
             self.last_linearisation = None;
         }
@@ -681,9 +682,9 @@ impl Reconstruction {
         };
         let free = self.mask(phase);
         let tol = self.settings.tolerance;
-        // Whether the iteration runs on the whole ride's model (not a step-1
-        // window's), so that an evaluation it makes is the ride's own.
-        let on_the_ride = !matches!((&self.window, phase), (Some(_), Phase::Step1));
+        // Whether the iteration runs on a step-1 window's model, not the
+        // whole ride's (whose evaluation is then the ride's own).
+        let window = matches!((&self.window, phase), (Some(_), Phase::Step1));
         let outcome = if phase == Phase::Step2 && self.settings.method == Method::Gd {
             let scale: Vec<f64> = self
                 .model
@@ -707,7 +708,6 @@ impl Reconstruction {
             // A window that will be widened only has to bring the fit into the
             // right basin; the next window refines it. A refit that ends on a
             // met model keeps its own tolerance for both tests.
-            let window = matches!((&self.window, phase), (Some(_), Phase::Step1));
             let near_enough = window
                 || (phase == Phase::Step2 && self.step2_near_enough && self.stage_iterations >= 1);
             let tol = if window {
@@ -728,7 +728,7 @@ impl Reconstruction {
                 &mut self.lm,
                 tol,
                 near_enough,
-                (self.keeps_linearisation && on_the_ride).then_some(&mut self.last_linearisation),
+                (self.keeps_linearisation && !window).then_some(&mut self.last_linearisation),
             )
         } else {
             let c = self.model.cost(&self.theta);
@@ -810,7 +810,7 @@ impl Reconstruction {
             // ride, each gaining a fifth of the one before. A step that does
             // not lower the cost still raises it.
             self.gd = GdState::new(self.settings.step_size);
-            if on_the_ride && !set_aside && outcome.evaluation.is_some() {
+            if !window && !set_aside && outcome.evaluation.is_some() {
                 return Some(self.report_evaluated(phase, outcome));
             }
         }
