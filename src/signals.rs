@@ -469,6 +469,98 @@ impl Signals {
         })
     }
 
+    /// The same ride in steps of about `step_s` seconds: rows merged in runs
+    /// that end on every fix's row (each fix keeps its time and place) and on
+    /// the last row. A merged step `J` of rows `a+1..=b` carries what they
+    /// carried: `dt_J = t_b - t_a`, the distance `d_J = sum d_j`, the mean
+    /// rate `w_J = sum w_j dt_j / dt_J` (so the heading it turns through,
+    /// `w_J dt_J`, is theirs exactly; the rotation's composition and the path
+    /// travelled along the step's end heading err by `O(|w|^2 dt_J^2)` and
+    /// `O(d_J |w| dt_J)`), and each channel's mean over the same weights.
+    ///
+    /// Step 1's windows only have to bring the fit into the right basin
+    /// (the whole ride, swept at the log's own rate, then settles it): on
+    /// these they cost a tenth of the log's rows. `None` where the log's own
+    /// steps are not at least twice shorter, or merging would leave fewer
+    /// than a hundred rows.
+    pub fn coarse(&self, step_s: f64) -> Option<Self> {
+        let n = self.len();
+        let rate = median_rate_hz(&self.t);
+        let every = (step_s * rate).floor();
+        // A rate that is not a number merges nothing either.
+        if every.is_nan() || every < 2.0 || n < 200 {
+            return None;
+        }
+        let every = every as usize;
+        let mut ends = Vec::with_capacity(n / every + self.fixes.len() + 2);
+        ends.push(0);
+        let mut last = 0;
+        for j in 1..n {
+            if j - last >= every || self.fix_at_row[j] != NO_FIX || j + 1 == n {
+                ends.push(j);
+                last = j;
+            }
+        }
+        if ends.len() < 100 {
+            return None;
+        }
+        let m = ends.len();
+        let (mut t, mut dt) = (Vec::with_capacity(m), Vec::with_capacity(m));
+        let (mut gyro, mut distance) = (Vec::with_capacity(m), Vec::with_capacity(m));
+        let mut channels: Vec<(String, Vec<f64>)> = self
+            .channels
+            .iter()
+            .map(|(name, _)| (name.clone(), Vec::with_capacity(m)))
+            .collect();
+        let mut fix_at_row = vec![NO_FIX; m];
+        let mut fixes = self.fixes.clone();
+        for (k, &b) in ends.iter().enumerate() {
+            let a = if k == 0 { 0 } else { ends[k - 1] + 1 };
+            let span: f64 = self.dt[a..=b].iter().sum();
+            // Weights of the merged rows: their steps' lengths, or equal
+            // where the steps have none (row 0, repeated times).
+            let weight = |j: usize| {
+                if span > 0.0 {
+                    self.dt[j] / span
+                } else {
+                    1.0 / (b + 1 - a) as f64
+                }
+            };
+            t.push(self.t[b]);
+            dt.push(if k == 0 { self.dt[0] } else { span });
+            gyro.push((a..=b).map(|j| self.gyro[j] * weight(j)).sum());
+            distance.push(self.distance[a..=b].iter().sum());
+            for ((_, out), (_, v)) in channels.iter_mut().zip(&self.channels) {
+                out.push((a..=b).map(|j| v[j] * weight(j)).sum());
+            }
+            fix_at_row[k] = self.fix_at_row[b];
+        }
+        // Every fix's row ends a merged step.
+        for f in &mut fixes {
+            f.row = ends.partition_point(|&e| e < f.row);
+        }
+        Some(Self {
+            source: self.source.clone(),
+            t,
+            dt,
+            gyro,
+            distance,
+            fixes,
+            fix_at_row,
+            frame: self.frame.clone(),
+            has_baro: self.has_baro,
+            has_gps_alt: self.has_gps_alt,
+            has_gnss_speed: self.has_gnss_speed,
+            channels,
+            odometer: self.odometer.clone(),
+            attitude: self.attitude.clone(),
+            warnings: self.warnings.clone(),
+            t0_unix_s: self.t0_unix_s,
+            t0_boot_s: self.t0_boot_s,
+            gap_spread: std::sync::OnceLock::new(),
+        })
+    }
+
     /// Values of an extra channel by name.
     pub fn channel(&self, name: &str) -> Option<&[f64]> {
         self.channels
@@ -817,6 +909,47 @@ pub fn distance_from_pulses(t: &[f64], pulses: &[bool], circumference: f64) -> (
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The coarse ride carries what the log's rows carried: the same span,
+    /// distance, turn (`sum w dt`, per axis) and channel integrals, every fix
+    /// on a merged row at its own time, and steps of about the length asked
+    /// for. A 20 Hz log is not merged at 0.1 s, a 100 Hz one in tens.
+    #[test]
+    fn the_coarse_ride_keeps_time_distance_turn_and_fixes() {
+        let sig = crate::testing::simulated_signals(5, 300.0, &[]);
+        assert!(sig.channel("temp_c").is_some());
+        let coarse = sig.coarse(0.1).expect("a 100 Hz log merges");
+        assert!(coarse.len() * 8 < sig.len() && coarse.len() * 12 > sig.len());
+        assert_eq!(coarse.t[0], sig.t[0]);
+        assert_eq!(coarse.t.last(), sig.t.last());
+        let total = |s: &Signals| s.distance.iter().sum::<f64>();
+        assert!((total(&coarse) - total(&sig)).abs() < 1e-9 * total(&sig));
+        let turn =
+            |s: &Signals| -> Vector3<f64> { s.gyro.iter().zip(&s.dt).map(|(w, dt)| w * *dt).sum() };
+        assert!((turn(&coarse) - turn(&sig)).norm() < 1e-9);
+        for w in coarse.t.windows(2) {
+            assert!(w[1] > w[0] && w[1] - w[0] <= 0.1 + 1e-9, "{w:?}");
+        }
+        for ((name, a), (_, b)) in coarse.channels.iter().zip(&sig.channels) {
+            let integral =
+                |s: &Signals, v: &[f64]| -> f64 { v.iter().zip(&s.dt).map(|(x, dt)| x * dt).sum() };
+            let (ia, ib) = (integral(&coarse, a), integral(&sig, b));
+            assert!(
+                (ia - ib).abs() < 1e-9 * ib.abs().max(1.0),
+                "{name}: {ia} {ib}"
+            );
+        }
+        assert_eq!(coarse.fixes.len(), sig.fixes.len());
+        for (k, (c, f)) in coarse.fixes.iter().zip(&sig.fixes).enumerate() {
+            assert_eq!(coarse.t[c.row], sig.t[f.row]);
+            assert_eq!(coarse.fix_index(c.row), Some(k));
+            assert_eq!((c.t, c.en), (f.t, f.en));
+        }
+        let fixes = (0..coarse.len()).filter(|&j| coarse.fix_index(j).is_some());
+        assert_eq!(fixes.count(), sig.fixes.len());
+        let slow = Signals::from_log(&crate::testing::winding_log(60.0, 20.0)).expect("signals");
+        assert!(slow.coarse(0.1).is_none());
+    }
 
     #[test]
     fn pulses_at_constant_speed_give_constant_distance() {

@@ -323,8 +323,8 @@ pub fn fix_errors(model: &Model, theta: &[f64]) -> Vec<f64> {
 /// fit's own starting damping of 1e-3 on `diag(J^T J)` only slowed the
 /// ill-conditioned segment directions: 4-10 iterations per fold, each
 /// gaining a fifth of the one before, where 2-3 reach the same optimum
-/// (and a fold ends on the second where it met its model, see
-/// [`Reconstruction::ending_on_a_met_model`]).
+/// (and a fold ends on the second where it met its model, as every fit
+/// does, see [`Reconstruction::running_to_its_tolerance`]).
 pub fn validation_settings(settings: &FitSettings) -> FitSettings {
     FitSettings {
         tolerance: settings.tolerance.max(1e-5),
@@ -446,14 +446,12 @@ pub fn held_out_from(
                 let start = shared
                     .as_ref()
                     .and_then(|base| train.chain_system_within(base, theta, &kept));
-                let fit = match start {
+                let mut fit = match start {
                     Some(start) => {
                         Reconstruction::resume_from(train, theta.to_vec(), settings.clone(), start)?
                     }
                     None => Reconstruction::resume(train, theta.to_vec(), settings.clone())?,
                 };
-                // A fold is needed near its optimum only: no confirming step.
-                let mut fit = fit.ending_on_a_met_model();
                 fit.finish();
                 let iterations = fit.history().len();
                 Ok(FoldResult {
@@ -541,7 +539,7 @@ mod tests {
     }
 
     /// A fold's refit that ends on its second step that met its model
-    /// (`Reconstruction::ending_on_a_met_model`) saves the confirming
+    /// (as fits do unless `Reconstruction::running_to_its_tolerance`) saves the confirming
     /// iteration and predicts the withheld fixes as the refit run to its
     /// tolerance does: to a millimetre. (With a step-1 window's looser
     /// tolerance, a first version of it ended on the first step and moved
@@ -568,8 +566,8 @@ mod tests {
             let train = model.withholding(|t| !withheld(t)).expect("model");
             let mut f =
                 Reconstruction::resume(train, theta.to_vec(), settings.clone()).expect("refit");
-            if met {
-                f = f.ending_on_a_met_model();
+            if !met {
+                f = f.running_to_its_tolerance();
             }
             f.finish();
             let errors: Vec<f64> = fix_errors(model, f.params())
@@ -596,8 +594,9 @@ mod tests {
     }
 
     /// The linearisation a fit keeps is its last iteration's, made where
-    /// that (confirming) step started: within the fit's tolerance of where
-    /// it ends, not at it. Started from it, the validation's folds predict
+    /// that step started: next to where it ends (the step met its quadratic
+    /// model, gaining a few hundred-thousandths of the cost), not at it.
+    /// Started from it, the validation's folds predict
     /// the withheld fixes as folds started from a new linearisation at the
     /// end do: to a millimetre. The fit's last report reads the ride's RMS
     /// from that step's own evaluation, as a sweep of the ride would.
@@ -624,7 +623,7 @@ mod tests {
         );
         assert!((kept.system.cost() - at_kept).abs() <= 1e-9 * at_kept);
         assert!(
-            at_kept >= at_end && at_kept - at_end <= fit.settings().tolerance * at_kept,
+            at_kept >= at_end && at_kept - at_end <= 1e-4 * at_kept,
             "{at_kept} against {at_end}"
         );
         let folds = Folds::default();

@@ -227,9 +227,9 @@ pub struct Reconstruction {
     /// The first LM iteration's linear system, where a caller already has it
     /// (see [`Reconstruction::resume_from`]).
     start_system: Option<crate::model::ChainSystem>,
-    /// Step 2 ends on a step that met its quadratic model (see
-    /// [`Reconstruction::ending_on_a_met_model`]).
-    step2_near_enough: bool,
+    /// A whole-ride stage ends on a step that met its quadratic model (see
+    /// [`Reconstruction::running_to_its_tolerance`]).
+    ends_on_a_met_model: bool,
     /// The last LM iteration's chain system of the whole ride is kept (see
     /// [`Reconstruction::keeping_its_last_linearisation`]).
     keeps_linearisation: bool,
@@ -245,6 +245,10 @@ pub struct Reconstruction {
     history: Vec<IterationReport>,
     /// Step 1's growing window; `None` once it covers the ride.
     window: Option<Window>,
+    /// The ride in coarser steps that step 1's windows are cut from while
+    /// there are windows (see [`coarse_model`]); `None` after them, or where
+    /// the log's steps are coarse already.
+    coarse: Option<Model>,
     /// Step 1 has moved past its first window: from here on it fits the
     /// segment biases instead of the constant bias (when the model has a prior).
     widened: bool,
@@ -316,6 +320,23 @@ const WINDOW_TOLERANCE: f64 = 1e-3;
 /// minimum in 7.
 const WHOLE_AFTER_ANCHORED_DAMPING: f64 = 1e-3;
 
+/// Length (s) of the steps of the ride that step 1's windows see (see
+/// [`Signals::coarse`]): a tenth of a second, ten rows of a 100 Hz log.
+const WINDOW_STEP_S: f64 = 0.1;
+
+/// `model` on the ride in [`WINDOW_STEP_S`] steps, for step 1's windows;
+/// `None` where the log's steps are that long already or the coarse ride's
+/// parameters would not be the ride's one for one (a gap in the GNSS speed
+/// that merged steps no longer show).
+fn coarse_model(model: &Model) -> Option<Model> {
+    let signals = model.signals.coarse(WINDOW_STEP_S)?;
+    let coarse =
+        Model::with_start(Arc::new(signals), model.spec.clone(), model.start.clone()).ok()?;
+    let names =
+        |m: &Model| -> Vec<String> { m.param_infos().into_iter().map(|(_, p)| p.name).collect() };
+    (names(&coarse) == names(model)).then_some(coarse)
+}
+
 /// Step 1's first window (s); it grows by half each time the fit on it converges.
 const FIRST_WINDOW_S: f64 = 120.0;
 
@@ -370,25 +391,25 @@ impl Reconstruction {
         Ok(fit)
     }
 
-    /// This fit's step 2 ends on its second or a later LM step that met its
-    /// quadratic model (`lm::iterate`'s `near_enough`, under the fit's own
-    /// tolerance, not a step-1 window's looser one), not on the step
-    /// after it that only confirms: for a refit that starts next to its
-    /// optimum and is needed only near it, as a validation fold's is. There
-    /// the cost is quadratic to the digits and the confirming step gains a
-    /// few hundredths of the tolerance (a 20-minute ride's folds took 3
-    /// iterations each, now 2). Not the first step: it solves the system the
-    /// caller linearised (the whole ride's, its fold's fixes taken out), and
-    /// what that system leaves shows in the second. Under the fold's own
-    /// tolerance the first step seldom meets its model anyway (the 20-minute
-    /// ride and comma end alike either way), but where it does the fold
-    /// stops short: on Berlin the held-out error moved by 1 mm and the `t`
-    /// of candidates that change nothing (drop 0.0 %) by up to 3 (the
-    /// mount's 2.3 -> -0.6; 2.0 with every fold run to its tolerance).
-    /// Ending on the second moves the 20-minute ride's held-out errors by
-    /// at most 1 mm and a jackknifed 1-sigma (the mount's yaw) by 2 %.
-    pub fn ending_on_a_met_model(mut self) -> Self {
-        self.step2_near_enough = true;
+    /// This fit runs each whole-ride stage (step 1 after its windows, step
+    /// 2) until a step gains at most the tolerance, as a confirmation.
+    ///
+    /// By default a stage ends instead on its second or a later LM step that
+    /// met its quadratic model (`lm::iterate`'s `near_enough`, under the
+    /// fit's own tolerance, not a step-1 window's looser one): there the
+    /// cost is quadratic to the digits and the confirming step gains a few
+    /// hundredths of the tolerance. A 30-minute ride's step 2 after the
+    /// noise search took 3 iterations, now 2, and a 20-minute ride's
+    /// validation folds 3, now 2 (their held-out errors moved by at most
+    /// 1 mm, a jackknifed 1-sigma, the mount's yaw, by 2 %). Not the first
+    /// step: it solves the system the stage started from (for a fold the
+    /// whole ride's, its fold's fixes taken out), and what that system
+    /// leaves shows in the second. Under the fold's own tolerance the first
+    /// step seldom meets its model anyway, but where it does the fold
+    /// stopped short: on Berlin the held-out error moved by 1 mm and the `t`
+    /// of candidates that change nothing (drop 0.0 %) by up to 3.
+    pub fn running_to_its_tolerance(mut self) -> Self {
+        self.ends_on_a_met_model = false;
         self
     }
 
@@ -423,7 +444,7 @@ impl Reconstruction {
         Ok(Self {
             lm: LmState::new(settings.damping),
             start_system: None,
-            step2_near_enough: false,
+            ends_on_a_met_model: true,
             keeps_linearisation: false,
             last_linearisation: None,
             gd: GdState::new(settings.step_size),
@@ -438,6 +459,7 @@ impl Reconstruction {
             history: Vec::new(),
             ride_rms_m: None,
             window: None,
+            coarse: None,
             widened,
             noise: None,
             noise_done: false,
@@ -457,20 +479,39 @@ impl Reconstruction {
 
     /// Start step 1 on the first window of the ride, if the ride is longer.
     fn with_first_window(mut self) -> Result<Self, FitError> {
+        self.coarse = coarse_model(&self.model);
         self.window = self.next_window(FIRST_WINDOW_S)?;
+        if self.window.is_none() {
+            self.coarse = None;
+        }
         Ok(self)
+    }
+
+    /// The model step 1's windows are cut from: the coarse ride while there
+    /// is one, else the ride itself.
+    fn windows_model(&self) -> &Model {
+        self.coarse.as_ref().unwrap_or(&self.model)
     }
 
     /// The window after the current one, `length` long. Under a robust loss
     /// the whole ride is a last window too, so that it is also reached by
-    /// least squares first (see `Model::least_squares`).
+    /// least squares first (see `Model::least_squares`), and so is it after
+    /// anchored windows: the ride's last stretch is fitted as one more
+    /// anchored window before the whole ride is swept. Without it the whole
+    /// ride started from the last stretch's dead reckoning (a 30-minute
+    /// ride: 289 s of it, 56 m RMS from the fixes) and took three whole-ride
+    /// iterations to come back; the stretch's own window takes four on the
+    /// coarse ride, at a twentieth of the cost.
     fn next_window(&self, length: f64) -> Result<Option<Window>, FitError> {
         let sig = &self.model.signals;
         let whole_done = self
             .window
             .as_ref()
             .is_some_and(|w| w.length >= sig.duration());
-        if length >= sig.duration() && (self.model.robust_scale().is_none() || whole_done) {
+        let after_anchored = self.window.as_ref().is_some_and(|w| w.from.is_some());
+        if length >= sig.duration()
+            && ((self.model.robust_scale().is_none() && !after_anchored) || whole_done)
+        {
             return Ok(None);
         }
         let length = length.min(sig.duration());
@@ -496,7 +537,8 @@ impl Reconstruction {
 
     /// Step 1's window over the ride's first `length` seconds, from row 0.
     fn cut_window(&self, length: f64, least_squares: bool) -> Result<Window, FitError> {
-        let model = self.model.restricted(self.model.signals.t[0] + length)?;
+        let source = self.windows_model();
+        let model = source.restricted(source.signals.t[0] + length)?;
         Ok(Window {
             length,
             model: model.least_squares(least_squares),
@@ -512,7 +554,7 @@ impl Reconstruction {
             .map(|(_, _, start)| start)
             .filter(|&start| start >= from && start.is_finite())
             .min_by(f64::total_cmp)?;
-        let t = &self.model.signals.t;
+        let t = &self.windows_model().signals.t;
         Some((t.partition_point(|&x| x < start), start))
     }
 
@@ -611,15 +653,17 @@ impl Reconstruction {
     }
 
     /// Every segment parameter (its index and the index of the first of its
-    /// (x, y, z) triple) with the log time of its first step.
+    /// (x, y, z) triple) with the log time of its first step, in the model
+    /// step 1's windows are cut from.
     fn segment_starts(&self) -> Vec<(usize, usize, f64)> {
-        let t = &self.model.signals.t;
+        let model = self.windows_model();
+        let t = &model.signals.t;
         let mut out = Vec::new();
-        for (e, effect) in self.model.effects().iter().enumerate() {
+        for (e, effect) in model.effects().iter().enumerate() {
             if effect.role() != Role::Segments {
                 continue;
             }
-            let range = self.model.range(e);
+            let range = model.range(e);
             for (k, i) in range.clone().enumerate() {
                 let first = effect.param_steps(k).map_or(0, |(f, _)| f);
                 let start = t.get(first).copied().unwrap_or(f64::INFINITY);
@@ -708,8 +752,7 @@ impl Reconstruction {
             // A window that will be widened only has to bring the fit into the
             // right basin; the next window refines it. A refit that ends on a
             // met model keeps its own tolerance for both tests.
-            let near_enough = window
-                || (phase == Phase::Step2 && self.step2_near_enough && self.stage_iterations >= 1);
+            let near_enough = window || (self.ends_on_a_met_model && self.stage_iterations >= 1);
             let tol = if window {
                 tol.max(WINDOW_TOLERANCE)
             } else {
@@ -781,11 +824,23 @@ impl Reconstruction {
                     let reached = self.model.signals.t[0] + length;
                     self.extrapolate_segments(reached);
                 }
+                if next.is_none() {
+                    self.coarse = None;
+                }
                 self.window = next;
                 self.widened = true;
                 self.stage_iterations = 0;
                 self.lm = LmState::new(damping);
-                return Some(self.report(phase, outcome, false));
+                // The whole ride with step 2's parameters free is step 2:
+                // fitted as step 1 and then confirmed by a step 2 of one
+                // iteration, it was swept once more to find nothing to gain.
+                let into_step2 = self.window.is_none()
+                    && self.has_segments()
+                    && self.mask(Phase::Step1) == self.mask(Phase::Step2);
+                if into_step2 {
+                    self.phase = Phase::Step2;
+                }
+                return Some(self.report(phase, outcome, into_step2));
             }
         }
         if stage_done {
@@ -889,19 +944,32 @@ impl Reconstruction {
             .model
             .free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let before = self.model.cost(&self.theta);
-        let found = noise::estimate(&self.model, &self.theta, &free, self.settings.auto_noise);
+        let found = noise::estimate_with_linearisation(
+            &self.model,
+            &self.theta,
+            &free,
+            self.settings.auto_noise,
+        );
         let mut outcome = StepOutcome {
             cost_before: before,
             cost: before,
             accepted: false,
             converged: true,
-            evaluations: found.as_ref().map_or(0, |n| n.evaluations),
+            evaluations: found.as_ref().map_or(0, |(n, _)| n.evaluations),
             evaluation: None,
         };
-        if let Some(n) = found {
+        if let Some((n, base)) = found {
             self.noise = Some(n);
             self.refresh_noise();
+            let searched_at = self.theta.clone();
             self.rebuild(&mut outcome);
+            // Step 2 resumes at the same point: its first system is the
+            // search's linearisation under the settings found (where the
+            // robust filter's weights do not move with them), not a sweep.
+            if self.model.robust_scale().is_none() && self.theta == searched_at {
+                self.start_system =
+                    base.and_then(|b| self.model.chain_system_like(&b, &self.theta));
+            }
         }
         self.iteration += 1;
         self.phase = Phase::Step2;
@@ -1122,6 +1190,9 @@ impl Reconstruction {
             check_observability(&model)?;
             self.theta = model.carry_over(&self.model, &self.theta);
             self.model = model;
+            if self.coarse.is_some() {
+                self.coarse = coarse_model(&self.model);
+            }
             // Step 1's window was cut from the old model: its parameters no
             // longer match theta's layout (a new segment length changes their
             // number). Cut it again over the same stretch.
@@ -1140,6 +1211,7 @@ impl Reconstruction {
             self.phase = Phase::Step1;
             self.phase_iterations = [0, 0];
             self.window = None;
+            self.coarse = None;
         } else if self.phase == Phase::Done && self.has_segments() {
             self.phase = Phase::Step2;
             self.phase_iterations[1] = 0;

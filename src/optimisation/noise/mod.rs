@@ -258,6 +258,20 @@ pub fn estimate(
     free: &[bool],
     which: AutoNoise,
 ) -> Option<NoiseEstimate> {
+    estimate_with_linearisation(model, theta, free, which).map(|(found, _)| found)
+}
+
+/// [`estimate`], and the chain system of `model` at `theta` over `free`
+/// that the search linearised the ride into (`None` where it searched on
+/// windows of the ride): a model with the settings found, reweighting it
+/// (`Model::chain_system_like`), has its first step's system without a
+/// sweep of the ride.
+pub fn estimate_with_linearisation(
+    model: &Model,
+    theta: &[f64],
+    free: &[bool],
+    which: AutoNoise,
+) -> Option<(NoiseEstimate, Option<ChainSystem>)> {
     let windows = (model.fix_span() > WINDOWED_SPAN_S).then_some(Windows {
         count: WINDOWS,
         length_s: WINDOW_S,
@@ -265,14 +279,14 @@ pub fn estimate(
     estimate_on(model, theta, free, which, windows)
 }
 
-/// [`estimate`] over the whole ride, or over `windows` of it.
+/// [`estimate_with_linearisation`] over the whole ride, or over `windows` of it.
 fn estimate_on(
     model: &Model,
     theta: &[f64],
     free: &[bool],
     which: AutoNoise,
     windows: Option<Windows>,
-) -> Option<NoiseEstimate> {
+) -> Option<(NoiseEstimate, Option<ChainSystem>)> {
     let mut spec = model.spec.clone();
     let heights = model.observes_gps_heights();
     let on = |list: &[(usize, bool)]| -> Vec<usize> {
@@ -515,7 +529,7 @@ fn estimate_on(
             limit: limit[d],
         }
     };
-    Some(NoiseEstimate {
+    let found = NoiseEstimate {
         gps_sigma_m: est(0),
         gps_tau_s: est(1),
         gps_white_m: est(3),
@@ -527,7 +541,13 @@ fn estimate_on(
         evaluations,
         gps_tails: None,
         calibration: Vec::new(),
-    })
+    };
+    // The whole ride's linearisation (not a window's).
+    let base = window_models
+        .is_empty()
+        .then(|| bases.into_iter().next())
+        .flatten();
+    Some((found, base))
 }
 
 /// Rides whose fixes span more than this (s) estimate their noise on
@@ -670,7 +690,7 @@ mod tests {
         let (model, theta) = fit.into_parts();
         let free = model.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let which = AutoNoise::default();
-        let whole = estimate_on(&model, &theta, &free, which, None).unwrap();
+        let (whole, _) = estimate_on(&model, &theta, &free, which, None).unwrap();
         let windows = Windows {
             count: 3,
             length_s: 300.0,
@@ -687,7 +707,7 @@ mod tests {
             fixes < model.observed_fixes() * 4 / 5,
             "{fixes} fixes in the windows"
         );
-        let part = estimate_on(&model, &theta, &free, which, Some(windows)).unwrap();
+        let (part, _) = estimate_on(&model, &theta, &free, which, Some(windows)).unwrap();
         for (name, w, p) in [
             ("sigma", &whole.gps_sigma_m, &part.gps_sigma_m),
             ("tau", &whole.gps_tau_s, &part.gps_tau_s),
