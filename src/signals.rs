@@ -527,7 +527,7 @@ impl Signals {
                 }
             };
             t.push(self.t[b]);
-            dt.push(if k == 0 { self.dt[0] } else { span });
+            dt.push(span);
             gyro.push((a..=b).map(|j| self.gyro[j] * weight(j)).sum());
             distance.push(self.distance[a..=b].iter().sum());
             for ((_, out), (_, v)) in channels.iter_mut().zip(&self.channels) {
