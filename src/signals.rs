@@ -104,7 +104,21 @@ pub struct Signals {
     /// search builds a model for every likelihood it evaluates (a 30-minute
     /// ride with five gaps took 22 ms a model for it, 2.2 s a fit).
     pub(crate) gap_spread: std::sync::OnceLock<std::sync::Arc<[f64]>>,
+    /// The ride in steps of [`COARSE_STEP_S`] ([`Signals::coarse`]), made
+    /// once: every validation fold and candidate of `diagnose` takes its
+    /// later iterations' derivatives from it.
+    coarse_steps: std::sync::OnceLock<Option<std::sync::Arc<Signals>>>,
 }
+
+/// The step of the coarse ride that fits take their windows and later
+/// derivatives from (s): ten rows of a 100 Hz log.
+pub const COARSE_STEP_S: f64 = 0.1;
+
+/// Rides with more rows than this do not hold their coarse ride
+/// ([`Signals::coarse_shared`]): a 6-hour ride's is some 20 MB, made only a
+/// few times a fit (it is validated one fold at a time), where a short
+/// ride's validation asks for it in every fold of every candidate.
+pub const COARSE_SHARED_ROWS: usize = 1_000_000;
 
 /// How the attitude is modelled: the choice and the reason for it.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
@@ -466,6 +480,7 @@ impl Signals {
             t0_boot_s,
             has_gnss_speed: log.gnss_speed_samples() >= 2,
             gap_spread: std::sync::OnceLock::new(),
+            coarse_steps: std::sync::OnceLock::new(),
         })
     }
 
@@ -483,6 +498,17 @@ impl Signals {
     /// these they cost a tenth of the log's rows. `None` where the log's own
     /// steps are not at least twice shorter, or merging would leave fewer
     /// than a hundred rows.
+    /// [`Signals::coarse`] in steps of [`COARSE_STEP_S`], made on first use
+    /// and shared from then on; on rides of more than
+    /// [`COARSE_SHARED_ROWS`] made anew each time, not held.
+    pub fn coarse_shared(&self) -> Option<std::sync::Arc<Signals>> {
+        let make = || self.coarse(COARSE_STEP_S).map(std::sync::Arc::new);
+        if self.len() > COARSE_SHARED_ROWS {
+            return make();
+        }
+        self.coarse_steps.get_or_init(make).clone()
+    }
+
     pub fn coarse(&self, step_s: f64) -> Option<Self> {
         let n = self.len();
         let rate = median_rate_hz(&self.t);
@@ -558,6 +584,7 @@ impl Signals {
             t0_unix_s: self.t0_unix_s,
             t0_boot_s: self.t0_boot_s,
             gap_spread: std::sync::OnceLock::new(),
+            coarse_steps: std::sync::OnceLock::new(),
         })
     }
 

@@ -93,6 +93,15 @@ fn fix_sigma(sigma: f64, acc: Option<f64>, median: Option<f64>) -> f64 {
     }
 }
 
+/// A model's linearisation and its coarse twin's at one point (see
+/// [`Model::derivative_anchor`]).
+#[derive(Clone, Debug)]
+pub(crate) struct DerivativeAnchor {
+    /// The ride's linearisation there with `J - J_c` for its derivatives
+    /// (`ChainLinearisation::missed_by`).
+    missed: normal::ChainLinearisation,
+}
+
 /// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
 /// position at `row`, compared with `target`, with an error of a wander
 /// shared with neighbouring fixes and a jitter of its own (see [`noise`]).
@@ -718,6 +727,57 @@ impl Model {
     ) -> Option<ChainSystem> {
         let lin = self.restricted_to(base.linearisation(), theta, kept)?;
         ChainSystem::new(lin, self.n_params())
+    }
+
+    /// Where the derivatives of `coarse` (this model on the ride in coarser
+    /// steps, `optimisation::coarse_model`) were compared with this
+    /// model's: both linearisations at the point `full` was made (`theta`,
+    /// this model's chain system there). `None` when `coarse` cannot be
+    /// linearised there.
+    pub(crate) fn derivative_anchor(
+        &self,
+        coarse: &Model,
+        full: &ChainSystem,
+        theta: &[f64],
+    ) -> Option<DerivativeAnchor> {
+        let mut free = vec![false; self.n_params()];
+        for &c in full.columns() {
+            *free.get_mut(c)? = true;
+        }
+        let missed = full
+            .linearisation()
+            .clone()
+            .missed_by(&coarse.chain_linearisation(theta, &free)?)?;
+        Some(DerivativeAnchor { missed })
+    }
+
+    /// [`Model::chain_system`] at `theta` over the anchor's parameters, with
+    /// the derivatives of `coarse` (this model on the coarse ride) there,
+    /// corrected by what they missed at the anchor
+    /// (`J = J_c(theta) + J(theta_a) - J_c(theta_a)`), and the residuals
+    /// of this model's `observed` values at `theta` (an evaluation's): a
+    /// sweep of the coarse ride, a tenth of this one at 100 Hz, instead of
+    /// the ride's. `None` when the three do not match.
+    pub(crate) fn chain_system_from_coarse(
+        &self,
+        coarse: &Model,
+        anchor: &DerivativeAnchor,
+        theta: &[f64],
+        observed: &[f64],
+    ) -> Option<ChainSystem> {
+        let mut free = vec![false; self.n_params()];
+        for &c in &anchor.missed.columns {
+            *free.get_mut(c)? = true;
+        }
+        let lin = coarse
+            .chain_linearisation(theta, &free)?
+            .corrected(&anchor.missed)?;
+        ChainSystem::new(self.moved(&lin, theta, observed)?, self.n_params())
+    }
+
+    /// The free parameters a [`DerivativeAnchor`] was made over.
+    pub(crate) fn anchor_columns(anchor: &DerivativeAnchor) -> &[usize] {
+        &anchor.missed.columns
     }
 
     /// Whether barometric rows are observed (the model fits the barometer's offset).

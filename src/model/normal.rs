@@ -346,6 +346,26 @@ impl Model {
         out
     }
 
+    /// `lin` (derivatives of this model's observations at `theta`, made
+    /// elsewhere: see [`Model::chain_system_from_coarse`]) with the
+    /// residuals, slopes and priors of this model at `theta`, where its
+    /// observed values are `observed` (an evaluation's,
+    /// [`super::Evaluation::observed`]). `None` if the counts disagree.
+    pub(crate) fn moved(
+        &self,
+        lin: &ChainLinearisation,
+        theta: &[f64],
+        observed: &[f64],
+    ) -> Option<ChainLinearisation> {
+        if observed.len() != lin.x.len() || observed.len() != self.observations.len() {
+            return None;
+        }
+        let mut out = lin.clone();
+        out.x.copy_from_slice(observed);
+        self.reweigh(&mut out, theta);
+        Some(out)
+    }
+
     /// [`Model::reweighted`] in place.
     fn reweigh(&self, lin: &mut ChainLinearisation, theta: &[f64]) {
         let plan = self.obs_plan(theta);
@@ -416,6 +436,83 @@ impl Model {
 }
 
 impl ChainLinearisation {
+    /// What the derivatives of `coarse` (a coarse ride's linearisation,
+    /// `Signals::coarse`) missed of `self`'s (the ride's own, at the same
+    /// point): `self` with `J - J_c` in place of its derivatives (`jg`, the
+    /// block entries, `h`, `at` and `y`), for [`ChainLinearisation::corrected`].
+    /// `None` where the two do not share their parameters, blocks and
+    /// observations.
+    pub(crate) fn missed_by(mut self, coarse: &Self) -> Option<Self> {
+        if !self.same_shape(coarse) {
+            return None;
+        }
+        self.jg -= &coarse.jg;
+        for (o, (_, vals)) in self.jb.iter_mut().enumerate() {
+            for (k, v) in vals.iter_mut().enumerate() {
+                *v -= coarse.jb[o].1[k];
+            }
+        }
+        for o in 0..self.h.len() {
+            self.h[o] -= coarse.h[o];
+            self.at[o] -= coarse.at[o];
+        }
+        for (b, ys) in self.y.iter_mut().enumerate() {
+            for (k, y) in ys.iter_mut().enumerate() {
+                *y -= coarse.y[b][k];
+            }
+        }
+        Some(self)
+    }
+
+    /// This linearisation (of a coarse ride at some `theta`) with its
+    /// derivatives corrected by what the coarse ride missed at an anchor
+    /// `theta_a` (`missed`, [`ChainLinearisation::missed_by`] there):
+    /// `J = J_c(theta) + J(theta_a) - J_c(theta_a)`. What is left is
+    /// `(J - J_c)(theta) - (J - J_c)(theta_a)`, second order in how far
+    /// `theta` moved and how coarse the ride is. `None` where the two do
+    /// not share their shape.
+    pub(crate) fn corrected(mut self, missed: &Self) -> Option<Self> {
+        if !self.same_shape(missed) {
+            return None;
+        }
+        self.jg += &missed.jg;
+        for (o, (_, vals)) in self.jb.iter_mut().enumerate() {
+            for (k, v) in vals.iter_mut().enumerate() {
+                *v += missed.jb[o].1[k];
+            }
+        }
+        for o in 0..self.h.len() {
+            self.h[o] += missed.h[o];
+            self.at[o] += missed.at[o];
+        }
+        for (b, ys) in self.y.iter_mut().enumerate() {
+            for (k, y) in ys.iter_mut().enumerate() {
+                *y += missed.y[b][k];
+            }
+        }
+        Some(self)
+    }
+
+    /// The same free parameters, blocks, observations (each in the same
+    /// block) and completed blocks' sums: derivatives that add entry by entry.
+    fn same_shape(&self, other: &Self) -> bool {
+        self.globals == other.globals
+            && self.x.len() == other.x.len()
+            && self.blocks.len() == other.blocks.len()
+            && self
+                .blocks
+                .iter()
+                .zip(&other.blocks)
+                .all(|(p, q)| p.params == q.params)
+            && self.jb.iter().zip(&other.jb).all(|(p, q)| p.0 == q.0)
+            && self.y.iter().zip(&other.y).all(|(p, q)| {
+                p.len() == q.len()
+                    && p.iter()
+                        .zip(q)
+                        .all(|(u, v)| (u.norm() == 0.0) == (v.norm() == 0.0))
+            })
+    }
+
     /// Whether some residual row depends on more than its own observation (whitened GPS errors).
     pub fn is_coupled(&self) -> bool {
         self.links.iter().any(|l| l.prev.is_some())

@@ -358,14 +358,23 @@ impl Model {
     /// the path only at the observed rows (never the whole ride: on a 6-hour
     /// ride a full trajectory is 190 MB).
     fn observation_values(&self, theta: &[f64]) -> Vec<ObsValue> {
+        self.observed(theta).1
+    }
+
+    /// The model's value `x_k` of each observed coordinate at `theta` and
+    /// its whitened value, from one sweep (see
+    /// [`Model::observation_values`]).
+    fn observed(&self, theta: &[f64]) -> (Vec<f64>, Vec<ObsValue>) {
         let plan = self.obs_plan(theta);
         let obs = &self.observations;
         let fw = self.forward(theta, self.sweep_start(theta), None, &plan.row, false);
-        let x = obs
+        let x: Vec<f64> = obs
             .iter()
             .enumerate()
-            .map(|(k, o)| plan.x(k, o.axis, &fw.p[k], &fw.delta[k]));
-        Whitener::new(&plan, obs).all(x)
+            .map(|(k, o)| plan.x(k, o.axis, &fw.p[k], &fw.delta[k]))
+            .collect();
+        let values = Whitener::new(&plan, obs).all(x.iter().copied());
+        (x, values)
     }
 
     /// Weighted residuals (observations, then priors) for `theta`.
@@ -386,8 +395,12 @@ impl Model {
 
     /// Cost and the unweighted squared misfits per kind of row, in one sweep.
     pub fn evaluate(&self, theta: &[f64]) -> Evaluation {
-        let mut ev = Evaluation::default();
-        for (o, v) in self.observations.iter().zip(self.observation_values(theta)) {
+        let (x, values) = self.observed(theta);
+        let mut ev = Evaluation {
+            observed: x,
+            ..Evaluation::default()
+        };
+        for (o, v) in self.observations.iter().zip(values) {
             ev.cost += v.r * v.r;
             let slot = match (o.axis, o.baro) {
                 (2, true) => 2,
@@ -408,11 +421,15 @@ impl Model {
 }
 
 /// What one cheap sweep tells about a parameter vector.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Evaluation {
     pub cost: f64,
     /// Sum of squared misfits (m^2): horizontal components, GPS up, barometric up.
     pub sum_sq_m: [f64; 3],
     /// Rows of each kind.
     pub count: [usize; 3],
+    /// The model's value `x_k` of each observed coordinate (m), in the
+    /// order of the observations: what a linearisation made elsewhere needs
+    /// to be moved here (see `Model::chain_system_chord`).
+    pub observed: Vec<f64>,
 }

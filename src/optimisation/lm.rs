@@ -39,7 +39,7 @@ const MAX_TRIES: usize = 12;
 const NEAR_ENOUGH_LAMBDA: f64 = 1e-2;
 
 /// What one iteration did.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct StepOutcome {
     pub cost_before: f64,
     pub cost: f64,

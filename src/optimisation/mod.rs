@@ -21,6 +21,7 @@
 //! The measurements and the history behind these choices: docs/method.md
 //! (step 1, step 2, the LM that cannot diverge).
 
+mod derivatives;
 pub mod gd;
 pub mod lm;
 pub mod noise;
@@ -233,6 +234,11 @@ pub struct Reconstruction {
     /// The last LM iteration's chain system of the whole ride is kept (see
     /// [`Reconstruction::keeping_its_last_linearisation`]).
     keeps_linearisation: bool,
+    /// Step 2's derivatives after its first iteration (see [`derivatives`]).
+    derivatives: derivatives::CoarseDerivatives,
+    /// See [`Reconstruction::linearising_the_ride_every_iteration`].
+    coarse_derivatives: bool,
+    coarse_iterations: usize,
     last_linearisation: Option<Linearised>,
     gd: GdState,
     iteration: usize,
@@ -320,21 +326,38 @@ const WINDOW_TOLERANCE: f64 = 1e-3;
 /// minimum in 7.
 const WHOLE_AFTER_ANCHORED_DAMPING: f64 = 1e-3;
 
-/// Length (s) of the steps of the ride that step 1's windows see (see
-/// [`Signals::coarse`]): a tenth of a second, ten rows of a 100 Hz log.
-const WINDOW_STEP_S: f64 = 0.1;
-
-/// `model` on the ride in [`WINDOW_STEP_S`] steps, for step 1's windows;
+/// `model` on the ride in [`crate::signals::COARSE_STEP_S`] steps, for
+/// step 1's windows and step 2's later derivatives (see [`derivatives`]);
 /// `None` where the log's steps are that long already or the coarse ride's
 /// parameters would not be the ride's one for one (a gap in the GNSS speed
 /// that merged steps no longer show).
-fn coarse_model(model: &Model) -> Option<Model> {
-    let signals = model.signals.coarse(WINDOW_STEP_S)?;
-    let coarse =
-        Model::with_start(Arc::new(signals), model.spec.clone(), model.start.clone()).ok()?;
+///
+/// It observes the fixes `model` observes, no others (a validation fold's
+/// model withholds some), each on its row of the coarse ride, with the
+/// same weights.
+pub(crate) fn coarse_model(model: &Model) -> Option<Model> {
+    let signals = model.signals.coarse_shared()?;
+    let mut coarse = Model::with_start(signals, model.spec.clone(), model.start.clone()).ok()?;
     let names =
         |m: &Model| -> Vec<String> { m.param_infos().into_iter().map(|(_, p)| p.name).collect() };
-    (names(&coarse) == names(model)).then_some(coarse)
+    if names(&coarse) != names(model) {
+        return None;
+    }
+    let key = |o: &crate::model::Observation| (o.t.to_bits(), o.axis, o.baro);
+    let rows: std::collections::HashMap<_, usize> = coarse
+        .observations
+        .iter()
+        .map(|o| (key(o), o.row))
+        .collect();
+    coarse.observations = model
+        .observations
+        .iter()
+        .map(|o| {
+            rows.get(&key(o))
+                .map(|&row| crate::model::Observation { row, ..*o })
+        })
+        .collect::<Option<Vec<_>>>()?;
+    Some(coarse)
 }
 
 /// Step 1's first window (s); it grows by half each time the fit on it converges.
@@ -425,6 +448,20 @@ impl Reconstruction {
         self
     }
 
+    /// This fit linearises the whole ride at every iteration of step 2,
+    /// never taking the derivatives from the coarse ride (see
+    /// [`derivatives`]): the reference the coarse derivatives are tested
+    /// against.
+    pub fn linearising_the_ride_every_iteration(mut self) -> Self {
+        self.coarse_derivatives = false;
+        self
+    }
+
+    /// Iterations so far whose derivatives came from the coarse ride.
+    pub fn coarse_iterations(&self) -> usize {
+        self.coarse_iterations
+    }
+
     /// The chain system of the whole ride that the fit's last iteration made
     /// and stepped from (within the fit's tolerance of where it ended), if
     /// it keeps one and the last iteration made one.
@@ -446,6 +483,9 @@ impl Reconstruction {
             start_system: None,
             ends_on_a_met_model: true,
             keeps_linearisation: false,
+            derivatives: derivatives::CoarseDerivatives::default(),
+            coarse_derivatives: true,
+            coarse_iterations: 0,
             last_linearisation: None,
             gd: GdState::new(settings.step_size),
             model,
@@ -729,6 +769,10 @@ impl Reconstruction {
         // Whether the iteration runs on a step-1 window's model, not the
         // whole ride's (whose evaluation is then the ride's own).
         let window = matches!((&self.window, phase), (Some(_), Phase::Step1));
+        // The system this iteration stepped on (a whole-ride LM iteration's),
+        // and whether it came from the coarse ride.
+        let mut made: Option<Linearised> = None;
+        let mut from_coarse = false;
         let outcome = if phase == Phase::Step2 && self.settings.method == Method::Gd {
             let scale: Vec<f64> = self
                 .model
@@ -763,6 +807,7 @@ impl Reconstruction {
             let start = self.start_system.take().filter(|c| {
                 phase == Phase::Step2 && crate::model::free_columns(&free) == c.columns()
             });
+            from_coarse = std::mem::take(&mut self.derivatives.handed) && start.is_some();
             lm::iterate(
                 start,
                 model,
@@ -771,7 +816,7 @@ impl Reconstruction {
                 &mut self.lm,
                 tol,
                 near_enough,
-                (self.keeps_linearisation && !window).then_some(&mut self.last_linearisation),
+                (!window).then_some(&mut made),
             )
         } else {
             let c = self.model.cost(&self.theta);
@@ -788,6 +833,31 @@ impl Reconstruction {
         self.phase_iterations[slot] += 1;
         self.stage_iterations += 1;
         let stage_done = outcome.converged || self.stage_iterations >= self.settings.max_iter;
+        // Step 2's next iteration takes its derivatives from the coarse ride
+        // (the system just made is let go first, unless it is kept: a fold's
+        // refit held two at a time).
+        self.coarse_iterations += usize::from(from_coarse);
+        // Only once the steps are small: the correction holds to second order
+        // in how far the fit moves from the anchor.
+        let coarse_next = self.coarse_derivatives
+            && phase == Phase::Step2
+            && outcome.accepted
+            && !stage_done
+            && outcome.cost_before - outcome.cost <= derivatives::SMALL_GAIN * outcome.cost;
+        if coarse_next && let Some(last) = &made {
+            self.derivatives.anchor(&self.model, last, from_coarse);
+        }
+        if self.keeps_linearisation && !window {
+            self.last_linearisation = made;
+        } else {
+            drop(made);
+        }
+        if coarse_next && let Some(ev) = &outcome.evaluation {
+            self.start_system = self
+                .derivatives
+                .system(&self.model, &self.theta, &ev.observed);
+            self.derivatives.handed = self.start_system.is_some();
+        }
         if phase == Phase::Step1
             && stage_done
             && let Some(window) = self
@@ -844,6 +914,10 @@ impl Reconstruction {
             }
         }
         if stage_done {
+            // The coarse ride's derivatives serve one stage (the next has
+            // other weights or parameters): not held through the noise search
+            // and the uncertainty.
+            self.derivatives.reset();
             self.stage_iterations = 0;
             self.phase = match phase {
                 Phase::Step1 if self.has_segments() => Phase::Step2,
@@ -1119,8 +1193,8 @@ impl Reconstruction {
     ) -> IterationReport {
         // Over the fixes this iteration fitted (in step 1 its window, which the
         // widening may just have replaced: then over the ride).
-        let rms_horizontal_m = match (outcome.evaluation, &self.window, phase) {
-            (Some(ev), _, _) => FitStats::from_evaluation(&ev),
+        let rms_horizontal_m = match (&outcome.evaluation, &self.window, phase) {
+            (Some(ev), _, _) => FitStats::from_evaluation(ev),
             (None, Some(w), Phase::Step1) => FitStats::of(&w.model, &self.theta),
             (None, _, _) => FitStats::of(&self.model, &self.theta),
         }
@@ -1172,6 +1246,8 @@ impl Reconstruction {
             return Ok(());
         }
         self.last_linearisation = None;
+        self.start_system = None;
+        self.derivatives.reset();
         let effects_changed = new.model.effects != self.settings.model.effects;
         if new.auto_noise != self.settings.auto_noise {
             // Asked anew: search again (the estimate stays in force meanwhile
