@@ -772,7 +772,7 @@ impl Model {
         let lin = coarse
             .chain_linearisation(theta, &free)?
             .corrected(&anchor.missed)?;
-        ChainSystem::new(self.moved(&lin, theta, observed)?, self.n_params())
+        ChainSystem::new(self.moved(lin, theta, observed)?, self.n_params())
     }
 
     /// The free parameters a [`DerivativeAnchor`] was made over.

@@ -353,17 +353,16 @@ impl Model {
     /// [`super::Evaluation::observed`]). `None` if the counts disagree.
     pub(crate) fn moved(
         &self,
-        lin: &ChainLinearisation,
+        mut lin: ChainLinearisation,
         theta: &[f64],
         observed: &[f64],
     ) -> Option<ChainLinearisation> {
         if observed.len() != lin.x.len() || observed.len() != self.observations.len() {
             return None;
         }
-        let mut out = lin.clone();
-        out.x.copy_from_slice(observed);
-        self.reweigh(&mut out, theta);
-        Some(out)
+        lin.x.copy_from_slice(observed);
+        self.reweigh(&mut lin, theta);
+        Some(lin)
     }
 
     /// [`Model::reweighted`] in place.
