@@ -484,6 +484,17 @@ impl Signals {
         })
     }
 
+    /// [`Signals::coarse`] in steps of [`COARSE_STEP_S`], made on first use
+    /// and shared from then on; on rides of more than
+    /// [`COARSE_SHARED_ROWS`] made anew each time, not held.
+    pub fn coarse_shared(&self) -> Option<std::sync::Arc<Signals>> {
+        let make = || self.coarse(COARSE_STEP_S).map(std::sync::Arc::new);
+        if self.len() > COARSE_SHARED_ROWS {
+            return make();
+        }
+        self.coarse_steps.get_or_init(make).clone()
+    }
+
     /// The same ride in steps of about `step_s` seconds: rows merged in runs
     /// that end on every fix's row (each fix keeps its time and place) and on
     /// the last row. A merged step `J` of rows `a+1..=b` carries what they
@@ -498,17 +509,6 @@ impl Signals {
     /// these they cost a tenth of the log's rows. `None` where the log's own
     /// steps are not at least twice shorter, or merging would leave fewer
     /// than a hundred rows.
-    /// [`Signals::coarse`] in steps of [`COARSE_STEP_S`], made on first use
-    /// and shared from then on; on rides of more than
-    /// [`COARSE_SHARED_ROWS`] made anew each time, not held.
-    pub fn coarse_shared(&self) -> Option<std::sync::Arc<Signals>> {
-        let make = || self.coarse(COARSE_STEP_S).map(std::sync::Arc::new);
-        if self.len() > COARSE_SHARED_ROWS {
-            return make();
-        }
-        self.coarse_steps.get_or_init(make).clone()
-    }
-
     pub fn coarse(&self, step_s: f64) -> Option<Self> {
         let n = self.len();
         let rate = median_rate_hz(&self.t);

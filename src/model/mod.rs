@@ -102,6 +102,13 @@ pub(crate) struct DerivativeAnchor {
     missed: normal::ChainLinearisation,
 }
 
+impl DerivativeAnchor {
+    /// The free parameters it was made over.
+    pub(crate) fn columns(&self) -> &[usize] {
+        &self.missed.columns
+    }
+}
+
 /// One scalar observation: component `axis` (0 east, 1 north, 2 up) of the
 /// position at `row`, compared with `target`, with an error of a wander
 /// shared with neighbouring fixes and a jitter of its own (see [`noise`]).
@@ -740,10 +747,7 @@ impl Model {
         full: &ChainSystem,
         theta: &[f64],
     ) -> Option<DerivativeAnchor> {
-        let mut free = vec![false; self.n_params()];
-        for &c in full.columns() {
-            *free.get_mut(c)? = true;
-        }
+        let free = self.mask_of(full.columns())?;
         let missed = full
             .linearisation()
             .clone()
@@ -765,19 +769,21 @@ impl Model {
         theta: &[f64],
         observed: &[f64],
     ) -> Option<ChainSystem> {
-        let mut free = vec![false; self.n_params()];
-        for &c in &anchor.missed.columns {
-            *free.get_mut(c)? = true;
-        }
+        let free = self.mask_of(anchor.columns())?;
         let lin = coarse
             .chain_linearisation(theta, &free)?
             .corrected(&anchor.missed)?;
         ChainSystem::new(self.moved(lin, theta, observed)?, self.n_params())
     }
 
-    /// The free parameters a [`DerivativeAnchor`] was made over.
-    pub(crate) fn anchor_columns(anchor: &DerivativeAnchor) -> &[usize] {
-        &anchor.missed.columns
+    /// The mask that frees `columns` (parameter indices), the inverse of
+    /// [`free_columns`]; `None` if one is not a parameter of this model.
+    fn mask_of(&self, columns: &[usize]) -> Option<Vec<bool>> {
+        let mut free = vec![false; self.n_params()];
+        for &c in columns {
+            *free.get_mut(c)? = true;
+        }
+        Some(free)
     }
 
     /// Whether barometric rows are observed (the model fits the barometer's offset).

@@ -441,26 +441,8 @@ impl ChainLinearisation {
     /// block entries, `h`, `at` and `y`), for [`ChainLinearisation::corrected`].
     /// `None` where the two do not share their parameters, blocks and
     /// observations.
-    pub(crate) fn missed_by(mut self, coarse: &Self) -> Option<Self> {
-        if !self.same_shape(coarse) {
-            return None;
-        }
-        self.jg -= &coarse.jg;
-        for (o, (_, vals)) in self.jb.iter_mut().enumerate() {
-            for (k, v) in vals.iter_mut().enumerate() {
-                *v -= coarse.jb[o].1[k];
-            }
-        }
-        for o in 0..self.h.len() {
-            self.h[o] -= coarse.h[o];
-            self.at[o] -= coarse.at[o];
-        }
-        for (b, ys) in self.y.iter_mut().enumerate() {
-            for (k, y) in ys.iter_mut().enumerate() {
-                *y -= coarse.y[b][k];
-            }
-        }
-        Some(self)
+    pub(crate) fn missed_by(self, coarse: &Self) -> Option<Self> {
+        self.plus_derivatives(coarse, -1.0)
     }
 
     /// This linearisation (of a coarse ride at some `theta`) with its
@@ -470,23 +452,30 @@ impl ChainLinearisation {
     /// `(J - J_c)(theta) - (J - J_c)(theta_a)`, second order in how far
     /// `theta` moved and how coarse the ride is. `None` where the two do
     /// not share their shape.
-    pub(crate) fn corrected(mut self, missed: &Self) -> Option<Self> {
-        if !self.same_shape(missed) {
+    pub(crate) fn corrected(self, missed: &Self) -> Option<Self> {
+        self.plus_derivatives(missed, 1.0)
+    }
+
+    /// `self` with `sign` times `other`'s derivatives (`jg`, the block
+    /// entries, `h`, `at` and `y`) added to its own, entry by entry; `None`
+    /// where the two do not share their shape.
+    fn plus_derivatives(mut self, other: &Self, sign: f64) -> Option<Self> {
+        if !self.same_shape(other) {
             return None;
         }
-        self.jg += &missed.jg;
+        self.jg += &other.jg * sign;
         for (o, (_, vals)) in self.jb.iter_mut().enumerate() {
             for (k, v) in vals.iter_mut().enumerate() {
-                *v += missed.jb[o].1[k];
+                *v += sign * other.jb[o].1[k];
             }
         }
         for o in 0..self.h.len() {
-            self.h[o] += missed.h[o];
-            self.at[o] += missed.at[o];
+            self.h[o] += other.h[o] * sign;
+            self.at[o] += other.at[o] * sign;
         }
         for (b, ys) in self.y.iter_mut().enumerate() {
             for (k, y) in ys.iter_mut().enumerate() {
-                *y += missed.y[b][k];
+                *y += other.y[b][k] * sign;
             }
         }
         Some(self)

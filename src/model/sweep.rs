@@ -430,6 +430,6 @@ pub struct Evaluation {
     pub count: [usize; 3],
     /// The model's value `x_k` of each observed coordinate (m), in the
     /// order of the observations: what a linearisation made elsewhere needs
-    /// to be moved here (see `Model::chain_system_chord`).
+    /// to be moved here (see `Model::chain_system_from_coarse`).
     pub observed: Vec<f64>,
 }

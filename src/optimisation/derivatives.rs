@@ -80,7 +80,7 @@ impl CoarseDerivatives {
         } else if self
             .anchor
             .as_ref()
-            .is_some_and(|a| Model::anchor_columns(a) != last.system.columns())
+            .is_some_and(|a| a.columns() != last.system.columns())
         {
             self.anchor = None;
         }

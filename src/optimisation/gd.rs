@@ -59,7 +59,6 @@ pub fn iterate(
             converged: state.flat >= 5,
             evaluations: 2,
             evaluation: None,
-            rho: f64::NAN,
         }
     } else {
         state.gamma *= 0.5;
@@ -70,7 +69,6 @@ pub fn iterate(
             converged: state.gamma < 1e-30,
             evaluations: 2,
             evaluation: None,
-            rho: f64::NAN,
         }
     }
 }

@@ -50,9 +50,6 @@ pub struct StepOutcome {
     pub evaluations: usize,
     /// The evaluation of the accepted parameters, when the step made one.
     pub evaluation: Option<Evaluation>,
-    /// The accepted step's actual over its predicted decrease (NaN where
-    /// no step was accepted or none was predicted).
-    pub rho: f64,
 }
 
 pub use crate::model::damped_solve;
@@ -196,7 +193,6 @@ fn step(
                     converged: gained <= tolerance * cost || met_its_model,
                     evaluations,
                     evaluation: Some(evaluation),
-                    rho,
                 };
             }
         }
@@ -217,7 +213,6 @@ fn step(
         converged: true,
         evaluations,
         evaluation: None,
-        rho: f64::NAN,
     }
 }
 

@@ -827,7 +827,6 @@ impl Reconstruction {
                 converged: true,
                 evaluations: 1,
                 evaluation: None,
-                rho: f64::NAN,
             }
         };
         self.iteration += 1;
@@ -1032,7 +1031,6 @@ impl Reconstruction {
             converged: true,
             evaluations: found.as_ref().map_or(0, |(n, _)| n.evaluations),
             evaluation: None,
-            rho: f64::NAN,
         };
         if let Some((n, base)) = found {
             self.noise = Some(n);
@@ -1067,7 +1065,6 @@ impl Reconstruction {
             converged: true,
             evaluations: 0,
             evaluation: None,
-            rho: f64::NAN,
         };
         self.iteration += 1;
         let found = noise::tails::estimate(&self.model, &self.theta, self.tails.is_some());
