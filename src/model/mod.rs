@@ -722,6 +722,19 @@ impl Model {
         ChainSystem::new(self.reweighted(lin, theta), self.n_params())
     }
 
+    /// [`Model::chain_system_like`] with its unknowns scaled as `base`'s
+    /// (see [`ChainSystem::scaled_like`]): the same cost at the minimum and
+    /// log-determinant, to rounding, for a noise likelihood, which asks for
+    /// nothing else. Not for LM steps: their damping `lambda D` is this
+    /// model's own `D`.
+    pub fn likelihood_system_like(&self, base: &ChainSystem, theta: &[f64]) -> Option<ChainSystem> {
+        let lin = base.linearisation();
+        if lin.x.len() != self.observations.len() {
+            return None;
+        }
+        ChainSystem::scaled_like(self.reweighted(lin, theta), base)
+    }
+
     /// [`Model::chain_system`] of this model, which observes the fixes of
     /// `base`'s model where `kept` is true, from `base`'s linearisation at
     /// the same `theta` (see [`Model::restricted_to`]). `None` when the

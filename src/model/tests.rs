@@ -331,6 +331,28 @@ fn chain_solver_gives_the_dense_lm_step() {
         );
         let (_, full_ld) = chain.solve_with_log_det(0.0).unwrap();
         assert!((log_det - full_ld).abs() < 1e-9 * full_ld.abs().max(1.0));
+        // A noise likelihood's system under other settings, scaled as the
+        // base's, gives its own system's minimum and log-determinant, to
+        // the floor `1e-15 max D` that keeps the array regular, which is
+        // the base's `D`'s (1e-12 to 3e-7 of them; in a likelihood of a
+        // 30-minute ride 1.5e-9, where the search looks at 0.2).
+        let mut spec = m.spec.clone();
+        spec.sigma_horizontal_m *= 1.7;
+        spec.gps_white_m *= 0.6;
+        spec.gps_tau_s = spec.gps_tau_s.map(|t| 2.5 * t);
+        let other = m.with_spec(spec).unwrap();
+        let own = other.chain_system_like(&chain, &p).unwrap();
+        let scaled = other.likelihood_system_like(&chain, &p).unwrap();
+        let (own_fit, own_ld) = own.fit_with_log_det().unwrap();
+        let (scaled_fit, scaled_ld) = scaled.fit_with_log_det().unwrap();
+        assert!(
+            (scaled_fit - own_fit).abs() < 1e-6 * own_fit.abs().max(1.0),
+            "minimum {scaled_fit} vs {own_fit}"
+        );
+        assert!(
+            (scaled_ld - own_ld).abs() < 1e-6 * own_ld.abs().max(1.0),
+            "log det {scaled_ld} vs {own_ld}"
+        );
     }
 }
 

@@ -242,7 +242,7 @@ pub fn neg2_log_likelihood(
 ) -> Option<f64> {
     let mut m = model.with_spec(spec.clone()).ok()?;
     m.weigh_updates(theta, &base.linearisation().x);
-    let chain = m.chain_system_like(base, theta)?;
+    let chain = m.likelihood_system_like(base, theta)?;
     let (fit, log_det) = chain.fit_with_log_det()?;
     let v = fit + m.noise_log_det(theta, free) + log_det;
     v.is_finite().then_some(v)
