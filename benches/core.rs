@@ -74,8 +74,7 @@ fn bench(c: &mut Criterion) {
             let base = model.chain_system(fit.params(), &free).unwrap();
             g.bench_function(format!("noise_likelihood/{label}"), |b| {
                 b.iter(|| {
-                    noise::neg2_log_likelihood(model, &base, fit.params(), &free, &model.spec)
-                        .unwrap()
+                    noise::neg2_log_likelihood(model, &base, fit.params(), &model.spec).unwrap()
                 })
             });
         }

@@ -39,8 +39,7 @@ fn run(name: &str, signals: Arc<Signals>, reference: &ReferenceTrack) -> anyhow:
     };
     let (a, ra, free) = fitted(FitSettings::default())?;
     let base = a.model().chain_system(a.params(), &free).expect("chain");
-    let la = neg2_log_likelihood(a.model(), &base, a.params(), &free, &a.model().spec)
-        .unwrap_or(f64::NAN);
+    let la = neg2_log_likelihood(a.model(), &base, a.params(), &a.model().spec).unwrap_or(f64::NAN);
     let mis = gps_misfits(a.model(), a.params());
     let mut c = [
         cauchy_scale(&mis[0]).unwrap_or(3.0),

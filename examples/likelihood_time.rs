@@ -39,7 +39,6 @@ fn main() -> anyhow::Result<()> {
             model,
             &base,
             fit.params(),
-            &free,
             &spec,
         ));
         times.push(started.elapsed().as_secs_f64());

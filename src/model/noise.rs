@@ -56,6 +56,7 @@
 //! coefficients from [`Link`].
 
 use super::{Model, Observation};
+use crate::contract::PriorRows;
 use crate::statistics::median;
 
 /// Consecutive fixes further apart than this (s) are not a pair in the
@@ -399,21 +400,34 @@ impl Model {
     /// innovations') and the prior rows' with a free
     /// entry (`1 / w^2` per row). A marginal likelihood adds it to the cost.
     pub(crate) fn noise_log_det(&self, theta: &[f64], free: &[bool]) -> f64 {
-        let plan = self.obs_plan(theta);
-        let obs: f64 = plan.links.iter().map(|l| -2.0 * l.u.ln()).sum();
-        let prior = self.prior_rows(theta);
-        let mut weight = vec![0.0f64; prior.residuals.len()];
-        for &(row, col, v) in &prior.entries {
-            if free[col] {
-                weight[row] = weight[row].max(v.abs());
-            }
-        }
-        obs + weight
-            .iter()
-            .filter(|w| **w > 0.0)
-            .map(|w| -2.0 * w.ln())
-            .sum::<f64>()
+        covariance_log_det(
+            &self.obs_plan(theta).links,
+            &self.prior_rows(theta),
+            |col| free[col],
+        )
     }
+}
+
+/// [`Model::noise_log_det`] from a chain's links (`u_k = 1 / sqrt(S_k)`) and
+/// prior rows, counting the rows with an entry where `free` holds:
+/// `sum -2 ln u_k + sum over rows -2 ln w`, `w` a row's largest free entry.
+pub(crate) fn covariance_log_det(
+    links: &[Link],
+    prior: &PriorRows,
+    free: impl Fn(usize) -> bool,
+) -> f64 {
+    let obs: f64 = links.iter().map(|l| -2.0 * l.u.ln()).sum();
+    let mut weight = vec![0.0f64; prior.residuals.len()];
+    for &(row, col, v) in &prior.entries {
+        if free(col) {
+            weight[row] = weight[row].max(v.abs());
+        }
+    }
+    obs + weight
+        .iter()
+        .filter(|w| **w > 0.0)
+        .map(|w| -2.0 * w.ln())
+        .sum::<f64>()
 }
 
 #[cfg(test)]

@@ -39,7 +39,7 @@
 
 use nalgebra::DVector;
 
-use super::noise::next_in_chain;
+use super::noise::{covariance_log_det, next_in_chain};
 use super::normal::{ChainLinearisation, V9};
 
 mod forward;
@@ -278,6 +278,14 @@ impl ChainSystem {
 
     pub fn cost(&self) -> f64 {
         self.lin.cost
+    }
+
+    /// `ln det` of the covariance of what the system weighs (see
+    /// `Model::noise_log_det`), from its own links and prior rows: the
+    /// model's at the point and settings it was made at, without the
+    /// observation plan made again.
+    pub fn noise_log_det(&self) -> f64 {
+        covariance_log_det(&self.lin.links, &self.lin.prior, |_| true)
     }
 
     pub(crate) fn linearisation(&self) -> &ChainLinearisation {

@@ -228,23 +228,22 @@ fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec 
     out
 }
 
-/// `-2 ln L` of `spec` linearised at `theta` over the `free` parameters
-/// (see the module docs), from `base`, the chain system of `model` there;
-/// `None` when the solve fails. Under a robust loss the wander is filtered
+/// `-2 ln L` of `spec` linearised at `theta` (see the module docs), from
+/// `base`, the chain system of `model` there over the parameters it
+/// integrates out (its columns); `None` when the solve fails. Under a robust loss the wander is filtered
 /// by the robust filter at `spec` (see `model::noise::robust_updates`), so
 /// that GPS jumps count as outliers, not as evidence of a large wander.
 pub fn neg2_log_likelihood(
     model: &Model,
     base: &ChainSystem,
     theta: &[f64],
-    free: &[bool],
     spec: &ModelSpec,
 ) -> Option<f64> {
     let mut m = model.with_spec(spec.clone()).ok()?;
     m.weigh_updates(theta, &base.linearisation().x);
     let chain = m.likelihood_system_like(base, theta)?;
     let (fit, log_det) = chain.fit_with_log_det()?;
-    let v = fit + m.noise_log_det(theta, free) + log_det;
+    let v = fit + chain.noise_log_det() + log_det;
     v.is_finite().then_some(v)
 }
 
@@ -389,8 +388,8 @@ fn estimate_on(
         // apart, so nearly independent.
         parts
             .iter()
-            .zip(bases.iter().zip(&frees))
-            .map(|(m, (b, f))| neg2_log_likelihood(m, b, theta, f, &at_inside))
+            .zip(&bases)
+            .map(|(m, b)| neg2_log_likelihood(m, b, theta, &at_inside))
             .sum::<Option<f64>>()
             .map_or(f64::INFINITY, |v| {
                 let tied = if tie {
@@ -630,7 +629,7 @@ pub fn segment_preference(model: &Model, theta: &[f64]) -> Vec<(f64, f64)> {
             crate::effects::Role::Step2Only,
         ]);
         let base = m.chain_system(&t, &free)?;
-        Some((seg, neg2_log_likelihood(&m, &base, &t, &free, &spec)?))
+        Some((seg, neg2_log_likelihood(&m, &base, &t, &spec)?))
     };
     let mut out: Vec<(f64, f64)> = if model.signals.fixes.len() <= SIDE_BY_SIDE_FIXES {
         SEGMENT_CHOICES.par_iter().filter_map(at).collect()
