@@ -19,6 +19,7 @@
 
 use faer::linalg::solvers::Solve;
 use nalgebra::{DMatrix, DVector, SMatrix, SVector, Vector3};
+use std::sync::Arc;
 
 use super::Model;
 use super::noise::Link;
@@ -48,6 +49,30 @@ pub struct NormalEquations {
 /// without GPS error correlation).
 #[derive(Clone, Debug)]
 pub(crate) struct ChainLinearisation {
+    /// The path's derivatives, shared: a noise likelihood reweighs the same
+    /// derivatives under another setting, and copying them (1.5 MB on a
+    /// 30-minute ride) was a twentieth of its time. Written through
+    /// [`std::ops::DerefMut`], which copies them first where they are shared.
+    pub derivatives: Arc<ChainDerivatives>,
+    /// The path value `x_o` (component of `at`) it compares.
+    pub x: Vec<f64>,
+    /// Residuals of the observations (whitened, through the robust loss).
+    pub r: DVector<f64>,
+    /// `(d r_o / d x_o, d r_o / d z_prev)`.
+    pub slope: Vec<(f64, f64)>,
+    /// How each observation is linked to the one before it (GPS error correlation).
+    pub links: Vec<Link>,
+    /// Prior rows (entries of free parameters only).
+    pub prior: PriorRows,
+    /// Cost of observations and priors.
+    pub cost: f64,
+}
+
+/// The parts of a [`ChainLinearisation`] that do not depend on the noise
+/// settings: which parameters are free, and the derivatives of the path at
+/// each observation.
+#[derive(Clone, Debug)]
+pub(crate) struct ChainDerivatives {
     /// Free parameters, in parameter order.
     pub columns: Vec<usize>,
     /// Free parameters acting everywhere.
@@ -60,26 +85,28 @@ pub(crate) struct ChainLinearisation {
     pub h: Vec<V9>,
     /// Where on the path observation `o` looks (`p`).
     pub at: Vec<Vector3<f64>>,
-    /// The path value `x_o` (component of `at`) it compares.
-    pub x: Vec<f64>,
     /// Row in whose step observation `o` is evaluated.
     pub rows: Vec<usize>,
     /// Rows of the global parameters (observations x globals).
     pub jg: DMatrix<f64>,
     /// Block an observation lies in (`u32::MAX`: none) and its entries there.
     pub jb: Vec<(u32, [f64; 3])>,
-    /// Residuals of the observations (whitened, through the robust loss).
-    pub r: DVector<f64>,
-    /// `(d r_o / d x_o, d r_o / d z_prev)`.
-    pub slope: Vec<(f64, f64)>,
-    /// How each observation is linked to the one before it (GPS error correlation).
-    pub links: Vec<Link>,
-    /// Prior rows (entries of free parameters only).
-    pub prior: PriorRows,
-    /// Cost of observations and priors.
-    pub cost: f64,
     /// Rows swept by the model.
     pub horizon: usize,
+}
+
+impl std::ops::Deref for ChainLinearisation {
+    type Target = ChainDerivatives;
+
+    fn deref(&self) -> &ChainDerivatives {
+        &self.derivatives
+    }
+}
+
+impl std::ops::DerefMut for ChainLinearisation {
+    fn deref_mut(&mut self) -> &mut ChainDerivatives {
+        Arc::make_mut(&mut self.derivatives)
+    }
 }
 
 /// What one chunk of [`Model::chain_linearisation`]'s sweep gathered: from
@@ -316,22 +343,24 @@ impl Model {
         let prior_cost = prior.residuals.iter().map(|x| x * x).sum::<f64>();
         prior.entries.retain(|&(_, col, _)| free[col]);
         Some(ChainLinearisation {
-            columns,
-            globals,
-            blocks,
-            y,
-            h,
-            at,
+            derivatives: Arc::new(ChainDerivatives {
+                columns,
+                globals,
+                blocks,
+                y,
+                h,
+                at,
+                rows: plan.row,
+                jg,
+                jb,
+                horizon: self.horizon(),
+            }),
             x: xs,
-            rows: plan.row,
-            jg,
-            jb,
             r,
             slope,
             links: plan.links,
             prior,
             cost: cost + prior_cost,
-            horizon: self.horizon(),
         })
     }
 
@@ -403,22 +432,24 @@ impl Model {
         // The residuals, slopes, links, prior rows and cost are this model's:
         // `reweigh` writes them over the picked ones.
         let mut sub = ChainLinearisation {
-            columns: lin.columns.clone(),
-            globals: lin.globals.clone(),
-            blocks: lin.blocks.clone(),
-            y: lin.y.clone(),
-            h: take.iter().map(|&o| lin.h[o]).collect(),
-            at: take.iter().map(|&o| lin.at[o]).collect(),
+            derivatives: Arc::new(ChainDerivatives {
+                columns: lin.columns.clone(),
+                globals: lin.globals.clone(),
+                blocks: lin.blocks.clone(),
+                y: lin.y.clone(),
+                h: take.iter().map(|&o| lin.h[o]).collect(),
+                at: take.iter().map(|&o| lin.at[o]).collect(),
+                rows: take.iter().map(|&o| lin.rows[o]).collect(),
+                jg: lin.jg.select_rows(take.iter()),
+                jb: take.iter().map(|&o| lin.jb[o]).collect(),
+                horizon: lin.horizon,
+            }),
             x: take.iter().map(|&o| lin.x[o]).collect(),
-            rows: take.iter().map(|&o| lin.rows[o]).collect(),
-            jg: lin.jg.select_rows(take.iter()),
-            jb: take.iter().map(|&o| lin.jb[o]).collect(),
             r: DVector::from_iterator(take.len(), take.iter().map(|&o| lin.r[o])),
             slope: take.iter().map(|&o| lin.slope[o]).collect(),
             links: take.iter().map(|&o| lin.links[o]).collect(),
             prior: lin.prior.clone(),
             cost: lin.cost,
-            horizon: lin.horizon,
         };
         self.reweigh(&mut sub, theta);
         Some(sub)
@@ -524,14 +555,15 @@ impl ChainLinearisation {
     /// `J^T J` and `J^T r` assembled densely from the moments (O(N + P^2)),
     /// for uncoupled rows (each row is `slope_o` times its observation's).
     fn normal_equations(mut self, np: usize) -> NormalEquations {
+        let derivatives = Arc::make_mut(&mut self.derivatives);
         for (o, &(m, _)) in self.slope.iter().enumerate() {
-            self.h[o] *= m;
-            self.jg.row_mut(o).scale_mut(m);
-            for v in &mut self.jb[o].1 {
+            derivatives.h[o] *= m;
+            derivatives.jg.row_mut(o).scale_mut(m);
+            for v in &mut derivatives.jb[o].1 {
                 *v *= m;
             }
         }
-        let ChainLinearisation {
+        let ChainDerivatives {
             columns,
             globals,
             blocks,
@@ -540,10 +572,9 @@ impl ChainLinearisation {
             rows,
             jg,
             jb,
-            r,
-            prior,
             ..
-        } = &self;
+        } = &*self.derivatives;
+        let (r, prior) = (&self.r, &self.prior);
         let no = r.len();
         let ng = globals.len();
         // Suffix moments after each block: first observation past its last step.
