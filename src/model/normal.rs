@@ -494,17 +494,19 @@ impl ChainLinearisation {
         if !self.same_shape(other) {
             return None;
         }
-        self.jg += &other.jg * sign;
-        for (o, (_, vals)) in self.jb.iter_mut().enumerate() {
+        // Copied once where shared, not checked again at every entry.
+        let own = Arc::make_mut(&mut self.derivatives);
+        own.jg += &other.jg * sign;
+        for (o, (_, vals)) in own.jb.iter_mut().enumerate() {
             for (k, v) in vals.iter_mut().enumerate() {
                 *v += sign * other.jb[o].1[k];
             }
         }
-        for o in 0..self.h.len() {
-            self.h[o] += other.h[o] * sign;
-            self.at[o] += other.at[o] * sign;
+        for o in 0..own.h.len() {
+            own.h[o] += other.h[o] * sign;
+            own.at[o] += other.at[o] * sign;
         }
-        for (b, ys) in self.y.iter_mut().enumerate() {
+        for (b, ys) in own.y.iter_mut().enumerate() {
             for (k, y) in ys.iter_mut().enumerate() {
                 *y += other.y[b][k] * sign;
             }

@@ -230,9 +230,10 @@ fn spec_at(spec: &ModelSpec, x: [f64; SETTINGS], which: AutoNoise) -> ModelSpec 
 
 /// `-2 ln L` of `spec` linearised at `theta` (see the module docs), from
 /// `base`, the chain system of `model` there over the parameters it
-/// integrates out (its columns); `None` when the solve fails. Under a robust loss the wander is filtered
-/// by the robust filter at `spec` (see `model::noise::robust_updates`), so
-/// that GPS jumps count as outliers, not as evidence of a large wander.
+/// integrates out (its columns); `None` when the solve fails. Under a
+/// robust loss the wander is filtered by the robust filter at `spec` (see
+/// `model::noise::robust_updates`), so that GPS jumps count as outliers,
+/// not as evidence of a large wander.
 pub fn neg2_log_likelihood(
     model: &Model,
     base: &ChainSystem,
