@@ -5,6 +5,7 @@
 //! Module map, in data-flow order:
 //! - [`import`]: every input (ride-log CSV, ROS 1 bag, ROS 2 MCAP, mapped CSV) into raw columns, with
 //!   errors naming file, line and column or topic; axes, units and datum checked against the data.
+//! - [`blunders`]: GPS fixes that cannot belong to the ride (`0, 0`, kilometres off), left out.
 //! - [`signals`]: what is derived once: time steps, rad/s, distance per step, fixes in ENU.
 //! - [`geodesy`]: WGS84 <-> local east/north/up.
 //! - [`effects`]: one module per physical effect (parameters, where it acts, derivatives).
@@ -23,6 +24,7 @@
 
 #[cfg(feature = "app")]
 pub mod app;
+pub mod blunders;
 pub mod contract;
 pub mod diagnosis;
 pub mod effects;

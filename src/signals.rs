@@ -407,8 +407,20 @@ impl Signals {
         let t0_unix_s = time("t0_unix_s", "a time in seconds since 1970")?;
         let t0_boot_s = time("t0_boot_s", "a time in seconds on the device's boot clock")?;
 
-        let first = log.fix.iter().position(Option::is_some).ok_or_else(|| {
-            unusable("the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into())
+        let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
+        if let Some(w) = blunders.describe(&file, &log.line, &t) {
+            warnings.push(w);
+        }
+        let usable = |row: usize| log.fix[row].is_some() && !blunders.contains(row);
+        let first = (0..n).find(|&row| usable(row)).ok_or_else(|| {
+            unusable(if blunders.is_empty() {
+                "the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into()
+            } else {
+                format!(
+                    "the log has no GPS fix but blunders ({} at 0, 0, a receiver's placeholder while it has no fix)",
+                    blunders.null_island
+                )
+            })
         })?;
         let (lat0, lon0) = log.fix[first].unwrap_or_default();
         let alt0 = log
@@ -432,7 +444,9 @@ impl Signals {
         let mut fixes = Vec::new();
         let mut fix_at_row = vec![NO_FIX; n];
         for (row, f) in log.fix.iter().enumerate() {
-            if let Some((lat, lon)) = *f {
+            if let Some((lat, lon)) = *f
+                && !blunders.contains(row)
+            {
                 let up = log.gps_alt_m.as_ref().and_then(|a| a[row]);
                 let enu = frame.to_enu(&Geodetic::new(lat, lon, up.unwrap_or(alt0)));
                 fix_at_row[row] = fixes.len() as u32;

@@ -132,3 +132,73 @@ fn a_ride_without_any_fix_is_refused() {
     let msg = refusal(&csv);
     assert!(msg.contains("no GPS fix"), "{msg}");
 }
+
+/// The path and its misfit of a fit of `csv`, with the signals' warnings.
+fn fitted(csv: &str) -> (Vec<[f64; 3]>, f64, Vec<String>) {
+    let log = parse(csv.as_bytes(), "ride.csv").expect("parse");
+    let sig = Arc::new(Signals::from_log(&log).expect("signals"));
+    let warnings = sig.warnings.clone();
+    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    rec.finish();
+    let path = rec.trajectory().p.iter().map(|p| [p.x, p.y, p.z]).collect();
+    (path, rec.stats().rms_horizontal_m, warnings)
+}
+
+/// A receiver's gross blunders (`0, 0` while it has no fix, one fix 1.1 km
+/// off, a run of four 3.3 km off) are left out before the fit, which then
+/// is the fit of the ride without them, to the digit, and says so on the
+/// first one's line. Kept, they made it fail ("not physical") or, one
+/// alone, took its path from 3 m to 70 m off the fixes.
+#[test]
+fn gross_gps_blunders_are_left_out_as_if_never_logged() {
+    let blunder = |k: usize| matches!(k, 30..=32 | 60 | 100..=103);
+    let first_row = std::cell::Cell::new(None);
+    let kept = std::cell::Cell::new(0usize);
+    let with = edited(300.0, |row, mut f| {
+        if !f[5].is_empty() {
+            kept.set(kept.get() + 1);
+            let k = kept.get();
+            if blunder(k) && first_row.get().is_none() {
+                first_row.set(Some(row));
+            }
+            let lat: f64 = f[5].parse().expect("lat");
+            match k {
+                30..=32 => (f[5], f[6]) = ("0.0".into(), "0.0".into()),
+                60 => f[5] = format!("{:.8}", lat + 0.01),
+                100..=103 => f[5] = format!("{:.8}", lat - 0.03),
+                _ => {}
+            }
+        }
+        Some(f)
+    });
+    let without = keeping_fixes(300.0, |k| !blunder(k));
+    // 1-based: the comments, the header, then the data rows.
+    let comments = with.lines().take_while(|l| l.starts_with('#')).count();
+    let line = first_row.get().expect("a blunder") + comments + 2;
+    let (path, rms, warnings) = fitted(&with);
+    let (clean, clean_rms, _) = fitted(&without);
+    let worst = path
+        .iter()
+        .zip(&clean)
+        .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9, "paths {worst} m apart");
+    assert_eq!(rms, clean_rms);
+    assert!(rms < 10.0, "{rms} m from the fixes");
+    let said = format!(
+        "8 GPS fixes left out as blunders: 3 at 0, 0 (a receiver's placeholder while it has no fix); 5 up to 3.3 km off the track, farther than 100 m/s moves between fixes (the first on line {line}"
+    );
+    assert!(
+        warnings.iter().any(|w| w.contains(&said)),
+        "{warnings:?}\n{said}"
+    );
+    let check =
+        gyropath::import::checks::check(&parse(with.as_bytes(), "ride.csv").expect("parse"));
+    assert!(
+        check
+            .verdicts
+            .iter()
+            .any(|v| v.subject == "GPS blunders" && v.message.contains(&said)),
+        "{check:?}"
+    );
+}

@@ -238,11 +238,17 @@ impl Imported {
 
     /// The signals of the imported log, consuming it, with the checks'
     /// warnings after those of the reader and the derivation (the signals
-    /// already carry the log's own warnings: they are not added twice).
+    /// already carry the log's own warnings: they are not added twice, nor
+    /// is a check's that only repeats one of the derivation's, as the GPS
+    /// blunders left out).
     pub fn into_signals(self) -> Result<crate::signals::Signals, crate::signals::SignalError> {
         let checks = self.check.warnings(self.mount.as_ref());
         let mut signals = crate::signals::Signals::from_owned_log(self.log)?;
-        signals.warnings.extend(checks);
+        let new: Vec<String> = checks
+            .into_iter()
+            .filter(|c| !signals.warnings.iter().any(|w| c.ends_with(w.as_str())))
+            .collect();
+        signals.warnings.extend(new);
         Ok(signals)
     }
 }

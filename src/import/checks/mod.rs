@@ -202,7 +202,11 @@ pub fn check(log: &RideLog) -> CheckReport {
         return report;
     }
     saturation(log, &mut report);
-    let fixes = summarise(log);
+    let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
+    if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
+        report.say("GPS blunders", Level::Warning, w);
+    }
+    let fixes = summarise(log, &blunders);
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.

@@ -2,6 +2,7 @@
 //! stretches, the odometer's scale and sign, the GPS altitude.
 
 use super::*;
+use crate::blunders::Blunders;
 
 /// Course stretches at least this long (m) along the odometer: GPS noise of a
 /// few metres then moves a course by a few degrees, not tens.
@@ -20,8 +21,10 @@ pub(super) struct AtFix {
     pub(super) acc: Option<[f64; 3]>,
 }
 
-pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
-    let Some(first) = log.fix.iter().flatten().next() else {
+/// The fixes of `log` but its `blunders`, with what happened between them.
+pub(super) fn summarise(log: &RideLog, blunders: &Blunders) -> Vec<AtFix> {
+    let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
+    let Some(first) = (0..log.len()).find_map(usable) else {
         return Vec::new();
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
@@ -46,7 +49,7 @@ pub(super) fn summarise(log: &RideLog) -> Vec<AtFix> {
             }
             acc_n += 1;
         }
-        if let Some((lat, lon)) = log.fix[j] {
+        if let Some((lat, lon)) = usable(j) {
             let enu = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
             out.push(AtFix {
                 t: log.t_s[j],

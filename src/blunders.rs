@@ -1,0 +1,312 @@
+//! Gross GPS blunders: fixes that cannot belong to the ride at all.
+//!
+//! Consumer receivers (phones, action cameras, drones) write fixes that are
+//! kilometres off: the placeholder `0, 0` ("null island") while they have no
+//! fix, a wild first fix before they lock, a run of seconds on a wrong
+//! solution. The model's least squares cannot survive one of them: a single
+//! fix 1.1 km off on a 5-minute simulated city ride took the path from
+//! 27.5 m to 71 m RMS from the fixes (and its noise estimate from a wander
+//! over 64 s to one over 1 s); one 11 km off, or three at `0, 0`, made the
+//! fit fail as "not physical". The robust loss and the noise model are for
+//! the errors a working receiver makes (reflections of 10-70 m); these are
+//! no measurement of the ride, and they are left out before anything else
+//! reads the fixes, with a warning that names them.
+//!
+//! A fix is a blunder when it is at exactly `0, 0`, or when it is not on the
+//! longest chain of fixes in which each is reachable from the one before:
+//!
+//! `|p_j - p_i| <= V_MAX_MPS (t_j - t_i) + SLACK_M + 3 (hacc_i + hacc_j)`.
+//!
+//! The bound is physical, not fitted: no vehicle gyropath reconstructs moves
+//! faster than [`V_MAX_MPS`], and [`SLACK_M`] covers the worst errors of a
+//! working receiver at both ends (a receiver that says its fix is poor, by
+//! its `gps_hacc_m`, gets that much more). So a blunder is at least
+//! `V_MAX_MPS dt + SLACK_M` (300 m a second apart) off the track, and no
+//! fix of a working receiver is ever one.
+
+/// The fastest any vehicle that gyropath reconstructs moves (m/s, 360 km/h).
+pub const V_MAX_MPS: f64 = 100.0;
+
+/// A working receiver's worst error at both ends of a pair of fixes (m):
+/// city reflections reach 70 m, so 100 m each.
+pub const SLACK_M: f64 = 200.0;
+
+/// How many fixes back a fix looks for the one before it on the chain: a
+/// run of blunders longer than this splits the ride into chains, of which
+/// the longest is kept.
+const LOOK_BACK: usize = 256;
+
+/// Mean Earth radius (m), for the distances between fixes: a spherical
+/// Earth is off by 0.5 % at most, far inside the bound's margin.
+const EARTH_RADIUS_M: f64 = 6_371_000.0;
+
+/// The blunders of a ride's fixes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Blunders {
+    /// Rows of the log whose fix is a blunder, ascending.
+    pub rows: Vec<usize>,
+    /// How many of them are at `0, 0`.
+    pub null_island: usize,
+    /// The farthest of the others from the nearest kept fix in time (m).
+    pub farthest_m: f64,
+}
+
+impl Blunders {
+    pub fn is_empty(&self) -> bool {
+        self.rows.is_empty()
+    }
+
+    /// Whether the fix on `row` is a blunder.
+    pub fn contains(&self, row: usize) -> bool {
+        self.rows.binary_search(&row).is_ok()
+    }
+
+    /// What a user is told, naming the first blunder's line and time; `None`
+    /// when there is none.
+    pub fn describe(&self, file: &str, line: &[u64], t: &[f64]) -> Option<String> {
+        let &first = self.rows.first()?;
+        let n = self.rows.len();
+        let far = n - self.null_island;
+        let mut what = Vec::new();
+        if self.null_island > 0 {
+            what.push(format!(
+                "{} at 0, 0 (a receiver's placeholder while it has no fix)",
+                self.null_island
+            ));
+        }
+        if far > 0 {
+            what.push(format!(
+                "{far} up to {:.1} km off the track, farther than {V_MAX_MPS:.0} m/s moves between fixes",
+                self.farthest_m / 1000.0
+            ));
+        }
+        Some(format!(
+            "{file}: {n} GPS fix{} left out as blunder{}: {} (the first on line {}, t = {:.2} s)",
+            if n == 1 { "" } else { "es" },
+            if n == 1 { "" } else { "s" },
+            what.join("; "),
+            line.get(first).copied().unwrap_or(first as u64 + 1),
+            t.get(first).copied().unwrap_or(f64::NAN),
+        ))
+    }
+}
+
+/// A fix as the screen sees it: its row, time, position on a plane about the
+/// ride's median (m) and its own accuracy (m, 0 when not logged).
+struct Point {
+    row: usize,
+    t: f64,
+    xy: [f64; 2],
+    hacc: f64,
+}
+
+/// Whether `b` is reachable from `a` (see the module's bound).
+fn reachable(a: &Point, b: &Point) -> bool {
+    let d = (b.xy[0] - a.xy[0]).hypot(b.xy[1] - a.xy[1]);
+    d <= V_MAX_MPS * (b.t - a.t).abs() + SLACK_M + 3.0 * (a.hacc + b.hacc)
+}
+
+/// The blunders among the fixes `fix` (by row, `None` where a row has none)
+/// at times `t`, with the receiver's accuracy `hacc` where logged.
+pub fn find(t: &[f64], fix: &[Option<(f64, f64)>], hacc: Option<&[Option<f64>]>) -> Blunders {
+    let is_null = |lat: f64, lon: f64| lat.abs() < 1e-9 && lon.abs() < 1e-9;
+    let mut null_rows = Vec::new();
+    let mut raw = Vec::new();
+    for (row, f) in fix.iter().enumerate() {
+        if let Some((lat, lon)) = *f {
+            if is_null(lat, lon) {
+                null_rows.push(row);
+            } else {
+                raw.push((row, lat, lon));
+            }
+        }
+    }
+    // Positions on the plane tangent at the fixes' median (equirectangular):
+    // the median stands among the good fixes however far the blunders are.
+    let median = |mut v: Vec<f64>| -> f64 {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    };
+    let lat0 = median(raw.iter().map(|p| p.1).collect());
+    let lon0 = median(raw.iter().map(|p| p.2).collect());
+    let cos0 = lat0.to_radians().cos();
+    let points: Vec<Point> = raw
+        .iter()
+        .map(|&(row, lat, lon)| {
+            let dlon = (lon - lon0 + 540.0).rem_euclid(360.0) - 180.0;
+            Point {
+                row,
+                t: t.get(row).copied().unwrap_or(f64::NAN),
+                xy: [
+                    EARTH_RADIUS_M * cos0 * dlon.to_radians(),
+                    EARTH_RADIUS_M * (lat - lat0).to_radians(),
+                ],
+                hacc: hacc
+                    .and_then(|h| h.get(row).copied().flatten())
+                    .filter(|h| h.is_finite() && *h > 0.0)
+                    .unwrap_or(0.0),
+            }
+        })
+        .collect();
+    let kept = longest_chain(&points);
+    let mut rows = null_rows.clone();
+    let mut farthest_m: f64 = 0.0;
+    let mut k = 0;
+    for (i, p) in points.iter().enumerate() {
+        while k + 1 < kept.len() && kept[k + 1] <= i {
+            k += 1;
+        }
+        if kept.get(k) == Some(&i) {
+            continue;
+        }
+        rows.push(p.row);
+        // The nearest kept fix in time, before or after.
+        let near = [kept.get(k), kept.get(k + 1)]
+            .into_iter()
+            .flatten()
+            .map(|&j| &points[j])
+            .min_by(|a, b| (a.t - p.t).abs().total_cmp(&(b.t - p.t).abs()));
+        if let Some(q) = near {
+            farthest_m = farthest_m.max((p.xy[0] - q.xy[0]).hypot(p.xy[1] - q.xy[1]));
+        }
+    }
+    rows.sort_unstable();
+    Blunders {
+        rows,
+        null_island: null_rows.len(),
+        farthest_m,
+    }
+}
+
+/// Indices (ascending) of the longest chain of `points` in which each is
+/// [`reachable`] from the one before; all of them when every neighbour is
+/// reachable from the last (the common case, one pass).
+fn longest_chain(points: &[Point]) -> Vec<usize> {
+    let n = points.len();
+    if points.windows(2).all(|w| reachable(&w[0], &w[1])) {
+        return (0..n).collect();
+    }
+    // length[j]: the longest chain ending at j; before[j]: its previous fix.
+    let mut length = vec![1usize; n];
+    let mut before = vec![usize::MAX; n];
+    for j in 0..n {
+        for i in j.saturating_sub(LOOK_BACK)..j {
+            if length[i] + 1 > length[j] && reachable(&points[i], &points[j]) {
+                length[j] = length[i] + 1;
+                before[j] = i;
+            }
+        }
+    }
+    let Some(mut j) = (0..n).max_by_key(|&j| (length[j], std::cmp::Reverse(j))) else {
+        return Vec::new();
+    };
+    let mut chain = vec![j];
+    while before[j] != usize::MAX {
+        j = before[j];
+        chain.push(j);
+    }
+    chain.reverse();
+    chain
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A straight ride east at 10 m/s with a fix a second, near Budapest.
+    fn ride(n: usize) -> (Vec<f64>, Vec<Option<(f64, f64)>>) {
+        let t: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        let fix = t
+            .iter()
+            .map(|&s| {
+                Some((
+                    47.5,
+                    19.05 + 10.0 * s / (111_320.0 * 47.5f64.to_radians().cos()),
+                ))
+            })
+            .collect();
+        (t, fix)
+    }
+
+    #[test]
+    fn a_clean_ride_has_no_blunder() {
+        let (t, fix) = ride(300);
+        assert!(find(&t, &fix, None).is_empty());
+    }
+
+    #[test]
+    fn null_island_a_wild_fix_and_a_run_are_found_and_nothing_else() {
+        let (t, mut fix) = ride(300);
+        fix[0] = Some((0.0, 0.0));
+        fix[50] = Some((0.0, 0.0));
+        // 1.1 km north for one fix.
+        fix[100] = fix[100].map(|(la, lo)| (la + 0.01, lo));
+        // 3.3 km south for five fixes in a row.
+        for f in &mut fix[200..205] {
+            *f = f.map(|(la, lo)| (la - 0.03, lo));
+        }
+        // A 70 m reflection is the robust loss's, not a blunder.
+        fix[250] = fix[250].map(|(la, lo)| (la + 70.0 / 111_320.0, lo));
+        let b = find(&t, &fix, None);
+        assert_eq!(b.rows, vec![0, 50, 100, 200, 201, 202, 203, 204]);
+        assert_eq!(b.null_island, 2);
+        assert!((b.farthest_m - 3340.0).abs() < 30.0, "{}", b.farthest_m);
+        let line: Vec<u64> = (0..300).map(|k| k + 5).collect();
+        let text = b.describe("ride.csv", &line, &t).unwrap_or_default();
+        assert!(
+            text.contains("8 GPS fixes left out")
+                && text.contains("2 at 0, 0")
+                && text.contains("6 up to 3.3 km")
+                && text.contains("line 5, t = 0.00 s"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_wrong_first_fix_is_left_out_not_the_ride() {
+        let (t, mut fix) = ride(100);
+        fix[0] = fix[0].map(|(la, lo)| (la + 0.5, lo + 0.5));
+        assert_eq!(find(&t, &fix, None).rows, vec![0]);
+    }
+
+    #[test]
+    fn a_fast_car_and_a_long_outage_are_not_blunders() {
+        // 90 m/s, then a 10-minute outage after which the car is 30 km on.
+        let n = 120;
+        let t: Vec<f64> = (0..n)
+            .map(|k| if k < 60 { k as f64 } else { k as f64 + 600.0 })
+            .collect();
+        let fix: Vec<_> = t
+            .iter()
+            .map(|&s| Some((47.5 + 50.0 * s / 111_320.0, 19.05)))
+            .collect();
+        assert!(find(&t, &fix, None).is_empty());
+    }
+
+    #[test]
+    fn a_fix_the_receiver_calls_poor_is_not_a_blunder() {
+        let (t, mut fix) = ride(100);
+        fix[40] = fix[40].map(|(la, lo)| (la + 500.0 / 111_320.0, lo));
+        assert_eq!(find(&t, &fix, None).rows, vec![40]);
+        let mut hacc = vec![Some(3.0); 100];
+        hacc[40] = Some(200.0);
+        assert!(find(&t, &fix, Some(&hacc)).is_empty());
+    }
+
+    #[test]
+    fn blunders_across_the_date_line_are_measured_the_short_way() {
+        let t: Vec<f64> = (0..50).map(f64::from).collect();
+        let mut fix: Vec<_> = t
+            .iter()
+            .map(|&s| {
+                Some((
+                    10.0,
+                    179.9999 + 5.0 * s / 111_000.0 - if s > 10.0 { 360.0 } else { 0.0 },
+                ))
+            })
+            .collect();
+        assert!(find(&t, &fix, None).is_empty());
+        fix[30] = fix[30].map(|(la, lo)| (la, lo + 0.1));
+        assert_eq!(find(&t, &fix, None).rows, vec![30]);
+    }
+}
