@@ -64,6 +64,32 @@ pub struct Fix {
     pub hdop: Option<f64>,
 }
 
+/// A hint that column `t_s` holds milliseconds, microseconds or
+/// nanoseconds, when read so its rate `rate_hz` (read as seconds) becomes a
+/// gyro's usual 10 Hz to 10 kHz and the log, `span_s` long read as
+/// seconds, lasts more than half a day (a bag's slow IMU over a few
+/// minutes is not told to divide its times); empty otherwise. Loggers
+/// often write their clock's own unit, and "0.10 Hz over 300000 s" alone
+/// does not say why.
+pub(crate) fn time_unit_hint(rate_hz: f64, span_s: f64) -> String {
+    if span_s < 43_200.0 {
+        return String::new();
+    }
+    [
+        (1e3, "milliseconds", "ms"),
+        (1e6, "microseconds", "us"),
+        (1e9, "nanoseconds", "ns"),
+    ]
+    .iter()
+    .find(|(scale, _, _)| (10.0..=10_000.0).contains(&(rate_hz * scale)))
+    .map_or_else(String::new, |(scale, unit, short)| {
+            format!(
+                ". Column 't_s' looks like {unit} (read so, the gyro runs at {:.0} Hz): t_s is in seconds: divide it by {scale:.0}, or read the file through a column map (--map, with [time] unit = \"{short}\")",
+                rate_hz * scale
+            )
+        })
+}
+
 /// Everything the model needs from a log, in SI units.
 #[derive(Clone, Debug)]
 pub struct Signals {
@@ -353,8 +379,9 @@ impl Signals {
         let rate = median_rate_hz(&t);
         if rate < MIN_GYRO_RATE_HZ {
             return Err(unusable(format!(
-                "the gyro is logged at {rate:.2} Hz ({n} rows over {:.0} s): far too slow to integrate a vehicle's turns, which take a few seconds; a path needs a gyro at {MIN_GYRO_RATE_HZ} Hz or more",
-                t[n - 1] - t[0]
+                "the gyro is logged at {rate:.2} Hz ({n} rows over {:.0} s): far too slow to integrate a vehicle's turns, which take a few seconds; a path needs a gyro at {MIN_GYRO_RATE_HZ} Hz or more{}",
+                t[n - 1] - t[0],
+                time_unit_hint(rate, t[n - 1] - t[0])
             )));
         }
         // Same size and alignment: the collect reuses the column's memory.

@@ -35,6 +35,7 @@ pub fn parse(bytes: &[u8], source: &str) -> Result<RideLog, LoadError> {
 pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, LoadError> {
     let head = read_metadata(&mut input, source)?;
     let mut reader = csv::ReaderBuilder::new()
+        .delimiter(delimiter(&head.header))
         .has_headers(true)
         .flexible(false)
         .trim(csv::Trim::All)
@@ -56,6 +57,31 @@ pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, Lo
         rows.push(&record)?;
     }
     rows.finish()
+}
+
+/// The field separator of a log whose header is `header`: a comma, or
+/// where the header has none, a tab or a semicolon (the exports of
+/// spreadsheets set to a language that writes decimal commas).
+fn delimiter(header: &[u8]) -> u8 {
+    if header.contains(&b',') {
+        b','
+    } else if header.contains(&b'\t') {
+        b'\t'
+    } else if header.contains(&b';') {
+        b';'
+    } else {
+        b','
+    }
+}
+
+/// `'s' is not a number`, and where `s` has a comma, that a decimal comma is
+/// not read (a spreadsheet's export in a language that writes them).
+fn not_a_number(s: &str) -> String {
+    if s.contains(',') {
+        format!("'{s}' is not a number (a decimal comma? numbers take a decimal point)")
+    } else {
+        format!("'{s}' is not a number")
+    }
 }
 
 /// The comment lines before the header, and the header line itself.
@@ -549,7 +575,7 @@ impl<'c> RowReader<'c> {
                         ));
                     }
                     Err(_) if numeric == Some(true) => {
-                        return Err(self.field_err(line, name, format!("'{s}' is not a number")));
+                        return Err(self.field_err(line, name, not_a_number(s)));
                     }
                     Err(_) => {
                         self.extra_numeric[k] = Some(false);
@@ -618,11 +644,9 @@ impl Row<'_, '_> {
                 self.name(i),
                 format!("'{s}' is not a finite number"),
             )),
-            Err(_) => Err(self.reader.field_err(
-                self.line,
-                self.name(i),
-                format!("'{s}' is not a number"),
-            )),
+            Err(_) => Err(self
+                .reader
+                .field_err(self.line, self.name(i), not_a_number(s))),
         }
     }
 
@@ -804,6 +828,45 @@ mod tests {
 
     fn err(text: &str) -> String {
         parse(text.as_bytes(), "bad.csv").unwrap_err().to_string()
+    }
+
+    #[test]
+    fn tab_and_semicolon_separated_logs_read_as_the_comma_separated() {
+        let good = parse(GOOD.as_bytes(), "ex.csv").unwrap();
+        for sep in ["\t", ";"] {
+            let text = GOOD
+                .lines()
+                .map(|l| {
+                    if l.starts_with('#') {
+                        l.to_string()
+                    } else {
+                        l.replace(',', sep)
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join("\n");
+            let log = parse(text.as_bytes(), "ex.csv").unwrap();
+            assert_eq!(
+                (&log.t_s, &log.fix, &log.gyro_dps),
+                (&good.t_s, &good.fix, &good.gyro_dps)
+            );
+        }
+        // A spreadsheet's decimal commas are named, on their line and column.
+        let text = GOOD
+            .lines()
+            .map(|l| {
+                if l.starts_with('#') {
+                    l.to_string()
+                } else {
+                    l.replace(',', ";").replace('.', ",")
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n");
+        assert_eq!(
+            err(&text),
+            "bad.csv:4: column 't_s': '0,00' is not a number (a decimal comma? numbers take a decimal point)"
+        );
     }
 
     #[test]

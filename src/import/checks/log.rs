@@ -9,8 +9,13 @@ pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) -> bool {
         (
             Level::Problem,
             format!(
-                ": far too slow to integrate turns; a path needs {} Hz or more",
-                crate::signals::MIN_GYRO_RATE_HZ
+                ": far too slow to integrate turns; a path needs {} Hz or more{}",
+                crate::signals::MIN_GYRO_RATE_HZ,
+                crate::signals::time_unit_hint(
+                    rate,
+                    log.t_s.last().copied().unwrap_or(0.0)
+                        - log.t_s.first().copied().unwrap_or(0.0)
+                )
             ),
         )
     } else if rate < 20.0 {

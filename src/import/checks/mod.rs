@@ -42,7 +42,7 @@ use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
 use log::{sample_rate, saturation};
-use track::{AtFix, altitude, odometer_scale, quality, stretches, summarise};
+use track::{AtFix, altitude, gps_units, odometer_scale, quality, stretches, summarise};
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -258,6 +258,7 @@ pub fn check(log: &RideLog) -> CheckReport {
     let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
     report.forward = forward;
     odometer_scale(&fixes, &idx, &mut report);
+    gps_units(log, &fixes, &mut report);
     altitude(log, &fixes, &mut report);
     quality(log, &mut report);
     if let Some(v) = vertical {
@@ -351,5 +352,27 @@ mod tests {
             r.verdicts
         );
         assert!(r.verdicts.iter().any(|v| v.subject == "gyro saturation"));
+    }
+
+    #[test]
+    fn fixes_in_radians_are_named_and_a_ride_in_degrees_is_not() {
+        let mut log = ride();
+        assert!(
+            !check(&log)
+                .verdicts
+                .iter()
+                .any(|v| v.subject == "GPS units")
+        );
+        for f in log.fix.iter_mut().flatten() {
+            *f = (f.0.to_radians(), f.1.to_radians());
+        }
+        let r = check(&log);
+        assert!(
+            r.verdicts.iter().any(|v| v.subject == "GPS units"
+                && v.level == Level::Problem
+                && v.message.contains("look like radians")),
+            "{:#?}",
+            r.verdicts
+        );
     }
 }

@@ -167,6 +167,35 @@ pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckR
     );
 }
 
+/// Fixes written in radians: every latitude within +-pi/2 and longitude
+/// within +-pi (read as degrees, a spot in the Gulf of Guinea), and a track
+/// that the odometer measures [`RADIANS_ODOMETER_RATIO`] times as long or
+/// more (in radians a fix moves 57.3 times less than the vehicle north, and
+/// less still east as read at that latitude; 46 times on a winding ride).
+pub(super) fn gps_units(log: &RideLog, fixes: &[AtFix], report: &mut CheckReport) {
+    let radian_range = log.fix.iter().flatten().all(|&(lat, lon)| {
+        lat.abs() <= std::f64::consts::FRAC_PI_2 && lon.abs() <= std::f64::consts::PI
+    });
+    let track: f64 = fixes
+        .windows(2)
+        .map(|w| (w[1].en[0] - w[0].en[0]).hypot(w[1].en[1] - w[0].en[1]))
+        .sum();
+    let odometer = fixes.last().map_or(0.0, |f| f.s);
+    if radian_range && odometer > 200.0 && odometer > RADIANS_ODOMETER_RATIO * track {
+        report.say(
+            "GPS units",
+            Level::Problem,
+            format!(
+                "lat_deg and lon_deg look like radians: every fix is within +-1.571 and +-3.142, and the fixes move {track:.0} m while the odometer measures {odometer:.0} m ({:.0} times as far); they must be degrees",
+                odometer / track.max(1e-9)
+            ),
+        );
+    }
+}
+
+/// See [`gps_units`]: a wrong circumference or even km/h for m/s is far less.
+const RADIANS_ODOMETER_RATIO: f64 = 20.0;
+
 /// The altitude's datum cannot be told from the data; a jump in it can.
 pub(super) fn altitude(log: &RideLog, fixes: &[AtFix], report: &mut CheckReport) {
     if log.gps_alt_m.is_none() {
