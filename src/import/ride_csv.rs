@@ -830,41 +830,33 @@ mod tests {
         parse(text.as_bytes(), "bad.csv").unwrap_err().to_string()
     }
 
+    /// [`GOOD`] with its data lines (and header) passed through `edit`.
+    fn good_with(edit: impl Fn(&str) -> String) -> String {
+        GOOD.lines()
+            .map(|l| {
+                if l.starts_with('#') {
+                    l.to_string()
+                } else {
+                    edit(l)
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+
     #[test]
     fn tab_and_semicolon_separated_logs_read_as_the_comma_separated() {
         let good = parse(GOOD.as_bytes(), "ex.csv").unwrap();
         for sep in ["\t", ";"] {
-            let text = GOOD
-                .lines()
-                .map(|l| {
-                    if l.starts_with('#') {
-                        l.to_string()
-                    } else {
-                        l.replace(',', sep)
-                    }
-                })
-                .collect::<Vec<_>>()
-                .join("\n");
-            let log = parse(text.as_bytes(), "ex.csv").unwrap();
+            let log = parse(good_with(|l| l.replace(',', sep)).as_bytes(), "ex.csv").unwrap();
             assert_eq!(
                 (&log.t_s, &log.fix, &log.gyro_dps),
                 (&good.t_s, &good.fix, &good.gyro_dps)
             );
         }
         // A spreadsheet's decimal commas are named, on their line and column.
-        let text = GOOD
-            .lines()
-            .map(|l| {
-                if l.starts_with('#') {
-                    l.to_string()
-                } else {
-                    l.replace(',', ";").replace('.', ",")
-                }
-            })
-            .collect::<Vec<_>>()
-            .join("\n");
         assert_eq!(
-            err(&text),
+            err(&good_with(|l| l.replace(',', ";").replace('.', ","))),
             "bad.csv:4: column 't_s': '0,00' is not a number (a decimal comma? numbers take a decimal point)"
         );
     }
