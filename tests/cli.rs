@@ -1408,3 +1408,36 @@ fn a_ride_too_short_to_validate_is_told_so() {
     assert!(!stdout.contains("NaN"), "{stdout}");
     assert!(path.exists());
 }
+
+/// `--between START,END` fits the part of a log between two times on its
+/// own clock (one side of a pause), and a window that keeps nothing or is
+/// not two increasing times is an error that says so.
+#[test]
+fn between_fits_a_part_of_the_ride_and_refuses_an_empty_or_malformed_window() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("ride.csv");
+    simulated(&ride, "4", "", "120");
+    let out = gyropath(&["fit", s(&ride), "--between", "30,90"]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.contains("(6001 rows, 60 s, 61 GPS fixes)"), "{text}");
+    for (window, says) in [
+        (
+            "500,600",
+            "--between 500,600 keeps 0 row(s) of the log, which runs from 0.00 to 120.00 s",
+        ),
+        ("90,30", "--between '90,30': give START,END"),
+        ("30", "--between '30': give START,END"),
+    ] {
+        let out = gyropath(&["fit", s(&ride), "--between", window]);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            !out.status.success() && err.contains(says),
+            "{window}: {err}"
+        );
+    }
+}

@@ -252,3 +252,37 @@ fn a_time_column_in_milliseconds_is_named_as_such() {
         "{msg}"
     );
 }
+
+/// A log that pauses (a logger stopped, an auto-pause) for longer than the
+/// gyro can be carried across is refused on the pause's line, with the
+/// `--between` windows of either side; each side then fits as a ride of
+/// its own. Across a 10-minute pause the fit took 122 s to end 13 m from
+/// its fixes, as a success.
+#[test]
+fn a_pause_in_the_log_is_refused_with_the_windows_either_side() {
+    let paused = edited(240.0, |_, mut f| {
+        let t: f64 = f[0].parse().expect("t_s");
+        if t >= 120.0 {
+            f[0] = format!("{:.2}", t + 600.0);
+        }
+        Some(f)
+    });
+    let msg = refusal(&paused);
+    let comments = paused.lines().take_while(|l| l.starts_with('#')).count();
+    let line = 12_000 + comments + 2;
+    assert!(
+        msg.contains(&format!(
+            "the log pauses for 600 s after t = 119.99 s (line {line})"
+        )) && msg.contains("--between 0,119.99 and --between 720,840"),
+        "{msg}"
+    );
+    // The first side, as --between keeps it, is the ride's first two minutes.
+    let mut log = parse(paused.as_bytes(), "ride.csv").expect("parse");
+    log.keep_rows(0..12_000);
+    let first = parse(
+        edited(240.0, |row, f| (row < 12_000).then_some(f)).as_bytes(),
+        "ride.csv",
+    )
+    .expect("parse");
+    assert_eq!((&log.t_s, &log.fix), (&first.t_s, &first.fix));
+}

@@ -146,6 +146,22 @@ pub struct SourceArgs {
     /// the time the FIT covers.
     #[arg(long)]
     pub wheel: Option<PathBuf>,
+    /// Fit only the part of the log between two times, START,END (s, on the
+    /// log's own clock, as `t_s`): one side of a pause, say.
+    #[arg(long, value_name = "START,END")]
+    pub between: Option<String>,
+}
+
+/// `START,END` of `--between`: two times, the first before the second.
+fn parse_between(text: &str) -> Result<(f64, f64)> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let times: Vec<f64> = parts.iter().filter_map(|p| p.parse::<f64>().ok()).collect();
+    match times.as_slice() {
+        [a, b] if parts.len() == 2 && a.is_finite() && b.is_finite() && a < b => Ok((*a, *b)),
+        _ => anyhow::bail!(
+            "--between '{text}': give START,END, two times in seconds on the log's clock, the first before the second (e.g. --between 0,600)"
+        ),
+    }
 }
 
 impl SourceArgs {
@@ -174,6 +190,7 @@ impl SourceArgs {
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--distance: {e}"))?,
             wheel: self.wheel.clone(),
+            between: self.between.as_deref().map(parse_between).transpose()?,
         })
     }
 }

@@ -185,6 +185,10 @@ pub struct ImportOptions {
     /// A Garmin FIT activity whose distance (its wheel-speed sensor's)
     /// becomes the ride's odometer, matched by UTC ([`fit::merge_distance`]).
     pub wheel: Option<PathBuf>,
+    /// Keep only the rows from the first to the second time (s, on the
+    /// log's own clock): a part of a ride, such as one side of a pause the
+    /// gyro cannot be integrated across.
+    pub between: Option<(f64, f64)>,
 }
 
 /// Where a ride's distance comes from.
@@ -415,6 +419,22 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
     }
     if options.distance == DistanceChoice::Gnss {
         without_odometer(&mut log)?;
+    }
+    if let Some((start, end)) = options.between {
+        let first = log.t_s.partition_point(|&t| t < start);
+        let last = log.t_s.partition_point(|&t| t <= end);
+        if last < first + 2 {
+            return Err(LoadError::File {
+                file: path.display().to_string(),
+                message: format!(
+                    "--between {start},{end} keeps {} row(s) of the log, which runs from {:.2} to {:.2} s",
+                    last.saturating_sub(first),
+                    log.t_s.first().copied().unwrap_or(f64::NAN),
+                    log.t_s.last().copied().unwrap_or(f64::NAN)
+                ),
+            });
+        }
+        log.keep_rows(first..last);
     }
     if topics.is_some() && !log.metadata.contains_key("source") {
         log.metadata.insert(
