@@ -67,7 +67,7 @@ pub struct Fix {
 /// The longest gap in the log's rows that the gyro cannot be integrated
 /// across (see [`MAX_GAP_S`]), said with its line, its time and the
 /// `--between` windows of the ride on either side of it; `None` without one.
-fn pause(t: &[f64], line: &[u64]) -> Option<String> {
+pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<String> {
     let (j, gap) = t
         .windows(2)
         .map(|w| w[1] - w[0])

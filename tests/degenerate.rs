@@ -276,6 +276,16 @@ fn a_pause_in_the_log_is_refused_with_the_windows_either_side() {
         )) && msg.contains("--between 0,119.99 and --between 720,840"),
         "{msg}"
     );
+    // `gyropath check` says the same.
+    let check =
+        gyropath::import::checks::check(&parse(paused.as_bytes(), "ride.csv").expect("parse"));
+    assert!(
+        check
+            .verdicts
+            .iter()
+            .any(|v| v.subject == "pause" && v.message.contains("--between 0,119.99")),
+        "{check:?}"
+    );
     // The first side, as --between keeps it, is the ride's first two minutes.
     let mut log = parse(paused.as_bytes(), "ride.csv").expect("parse");
     log.keep_rows(0..12_000);
