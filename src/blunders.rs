@@ -34,6 +34,9 @@
 //! changes are fixes, at the row where it first appears. A receiver that
 //! repeats its fix while standing (the Husky robot's, 7 of 988) keeps them.
 
+use crate::geodesy::{Geodetic, LocalFrame};
+use crate::statistics::median;
+
 /// The fastest any vehicle that gyropath reconstructs moves (m/s, 360 km/h).
 pub const V_MAX_MPS: f64 = 100.0;
 
@@ -45,10 +48,6 @@ pub const SLACK_M: f64 = 200.0;
 /// run of blunders longer than this splits the ride into chains, of which
 /// the longest is kept.
 const LOOK_BACK: usize = 256;
-
-/// Mean Earth radius (m), for the distances between fixes: a spherical
-/// Earth is off by 0.5 % at most, far inside the bound's margin.
-const EARTH_RADIUS_M: f64 = 6_371_000.0;
 
 /// The fixes of a ride that are left out: a logger's held repeats, then blunders.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -144,8 +143,9 @@ pub fn held(fix: &[Option<(f64, f64)>]) -> Vec<usize> {
     }
 }
 
-/// A fix as the screen sees it: its row, time, position on a plane about the
-/// ride's median (m) and its own accuracy (m, 0 when not logged).
+/// A fix as the screen sees it: its row, time, east and north (m) in the
+/// local frame at the fixes' median and its own accuracy (m, 0 when not
+/// logged).
 struct Point {
     row: usize,
     t: f64,
@@ -181,26 +181,22 @@ pub fn find(t: &[f64], fix: &[Option<(f64, f64)>], hacc: Option<&[Option<f64>]>)
             }
         }
     }
-    // Positions on the plane tangent at the fixes' median (equirectangular):
-    // the median stands among the good fixes however far the blunders are.
-    let median = |mut v: Vec<f64>| -> f64 {
-        v.sort_by(f64::total_cmp);
-        v.get(v.len() / 2).copied().unwrap_or(0.0)
+    // East and north in the local frame at the fixes' median: the median
+    // stands among the good fixes however far the blunders are.
+    let median_of = |coordinate: fn(&(usize, f64, f64)) -> f64| {
+        let mut values: Vec<f64> = raw.iter().map(coordinate).collect();
+        median(&mut values)
     };
-    let lat0 = median(raw.iter().map(|p| p.1).collect());
-    let lon0 = median(raw.iter().map(|p| p.2).collect());
-    let cos0 = lat0.to_radians().cos();
+    let (lat0, lon0) = (median_of(|p| p.1), median_of(|p| p.2));
+    let frame = LocalFrame::new(Geodetic::new(lat0, lon0, 0.0));
     let points: Vec<Point> = raw
         .iter()
         .map(|&(row, lat, lon)| {
-            let dlon = (lon - lon0 + 540.0).rem_euclid(360.0) - 180.0;
+            let enu = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
             Point {
                 row,
                 t: t.get(row).copied().unwrap_or(f64::NAN),
-                xy: [
-                    EARTH_RADIUS_M * cos0 * dlon.to_radians(),
-                    EARTH_RADIUS_M * (lat - lat0).to_radians(),
-                ],
+                xy: [enu.x, enu.y],
                 hacc: hacc
                     .and_then(|h| h.get(row).copied().flatten())
                     .filter(|h| h.is_finite() && *h > 0.0)
@@ -230,13 +226,10 @@ pub fn find(t: &[f64], fix: &[Option<(f64, f64)>], hacc: Option<&[Option<f64>]>)
             farthest_m = farthest_m.max((p.xy[0] - q.xy[0]).hypot(p.xy[1] - q.xy[1]));
         }
     }
-    rows.sort_unstable();
-    let first = rows.first().copied();
+    let first = rows.iter().copied().min();
     let held = held_rows.len();
-    if held > 0 {
-        rows.extend(held_rows);
-        rows.sort_unstable();
-    }
+    rows.extend(held_rows);
+    rows.sort_unstable();
     Blunders {
         rows,
         held,

@@ -144,6 +144,19 @@ fn fitted(csv: &str) -> (Vec<[f64; 3]>, f64, Vec<String>) {
     (path, rec.stats().rms_horizontal_m, warnings)
 }
 
+/// Asserts that `gyropath check` of `csv` has a verdict on `subject` whose
+/// message contains `text`.
+fn check_says(csv: &str, subject: &str, text: &str) {
+    let check = gyropath::import::checks::check(&parse(csv.as_bytes(), "ride.csv").expect("parse"));
+    assert!(
+        check
+            .verdicts
+            .iter()
+            .any(|v| v.subject == subject && v.message.contains(text)),
+        "{check:?}"
+    );
+}
+
 /// A receiver's gross blunders (`0, 0` while it has no fix, one fix 1.1 km
 /// off, a run of four 3.3 km off) are left out before the fit, which then
 /// is the fit of the ride without them, to the digit, and says so on the
@@ -192,15 +205,7 @@ fn gross_gps_blunders_are_left_out_as_if_never_logged() {
         warnings.iter().any(|w| w.contains(&said)),
         "{warnings:?}\n{said}"
     );
-    let check =
-        gyropath::import::checks::check(&parse(with.as_bytes(), "ride.csv").expect("parse"));
-    assert!(
-        check
-            .verdicts
-            .iter()
-            .any(|v| v.subject == "GPS blunders" && v.message.contains(&said)),
-        "{check:?}"
-    );
+    check_says(&with, "GPS blunders", &said);
 }
 
 /// A logger that writes its last fix on every row (at the gyro's 100 Hz)
@@ -277,15 +282,7 @@ fn a_pause_in_the_log_is_refused_with_the_windows_either_side() {
         "{msg}"
     );
     // `gyropath check` says the same.
-    let check =
-        gyropath::import::checks::check(&parse(paused.as_bytes(), "ride.csv").expect("parse"));
-    assert!(
-        check
-            .verdicts
-            .iter()
-            .any(|v| v.subject == "pause" && v.message.contains("--between 0,119.99")),
-        "{check:?}"
-    );
+    check_says(&paused, "pause", "--between 0,119.99");
     // The first side, as --between keeps it, is the ride's first two minutes.
     let mut log = parse(paused.as_bytes(), "ride.csv").expect("parse");
     log.keep_rows(0..12_000);
