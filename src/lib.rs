@@ -34,6 +34,7 @@ pub mod geodesy;
 pub mod import;
 pub mod limits;
 pub mod model;
+pub mod odometer_jumps;
 pub mod optimisation;
 pub mod pipeline;
 pub mod report;

@@ -471,6 +471,9 @@ impl Signals {
         let t0_unix_s = time("t0_unix_s", "a time in seconds since 1970")?;
         let t0_boot_s = time("t0_boot_s", "a time in seconds on the device's boot clock")?;
 
+        if let Some(w) = distance_jumps(log).describe(&file, &log.line, &t) {
+            warnings.push(w);
+        }
         let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
         if let Some(w) = blunders.describe(&file, &log.line, &t) {
             warnings.push(w);
@@ -695,9 +698,11 @@ pub fn odometer_distance(
             Some(from) => Odometer::Merged { from: from.clone() },
             None => Odometer::Cumulative,
         };
-        Ok((distance_from_odometer(odo, log)?, kind))
+        let (odo, _) = crate::odometer_jumps::cumulative(&log.t_s, odo);
+        Ok((distance_from_odometer(&odo, log)?, kind))
     } else if let Some(speed) = &log.speed_mps {
-        Ok((distance_from_speed(speed, log)?, Odometer::Speed))
+        let (speed, _) = crate::odometer_jumps::speed("speed_mps", speed);
+        Ok((distance_from_speed(&speed, log)?, Odometer::Speed))
     } else if let Some(pulses) = &log.wheel_pulse {
         let c: f64 = log
             .wheel_circumference_m()
@@ -715,12 +720,28 @@ pub fn odometer_distance(
             },
         ))
     } else if let Some(speed) = &log.gps_speed_mps {
-        distance_from_gnss_speed(speed, log, rate_dps)
+        let (speed, _) = crate::odometer_jumps::speed("gps_speed_mps", speed);
+        distance_from_gnss_speed(&speed, log, rate_dps)
     } else {
         Err(SignalError::Unusable {
             file: log.source.clone(),
             message: "the log has no distance column".into(),
         })
+    }
+}
+
+/// The readings of the column [`odometer_distance`] takes the distance from
+/// that are no distance (see [`crate::odometer_jumps`]), as it mends them.
+pub fn distance_jumps(log: &RideLog) -> crate::odometer_jumps::Jumps {
+    use crate::odometer_jumps::{cumulative, speed};
+    if let Some(odo) = &log.odo_m {
+        cumulative(&log.t_s, odo).1
+    } else if let Some(v) = &log.speed_mps {
+        speed("speed_mps", v).1
+    } else if let (None, Some(v)) = (&log.wheel_pulse, &log.gps_speed_mps) {
+        speed("gps_speed_mps", v).1
+    } else {
+        crate::odometer_jumps::Jumps::default()
     }
 }
 
@@ -1261,6 +1282,35 @@ mod attitude_tests {
         let (d, kind) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
         assert_eq!(kind, Odometer::Speed);
         assert!((d[1] - 0.2).abs() < 1e-12 && (d[n - 1] + 0.1).abs() < 1e-12);
+    }
+
+    /// A speed's invalid-value code (a CAN signal's 0xFFFF, 655.35) is no
+    /// distance: read as empty, as the check and the fit's warning say;
+    /// taken as a speed it put 65.5 m into one 0.1 s step.
+    #[test]
+    fn an_invalid_speed_code_is_read_as_an_empty_field() {
+        let mut log = crate::testing::winding_log(30.0, 10.0);
+        let n = log.len();
+        let mut speed: Vec<Option<f64>> = vec![Some(2.0); n];
+        speed[n / 2] = Some(655.35);
+        log.odo_m = None;
+        log.speed_mps = Some(speed);
+        let (d, _) = odometer_distance(&log, |j| log.gyro_dps[j]).unwrap();
+        for j in 1..n {
+            let dt = log.t_s[j] - log.t_s[j - 1];
+            assert!(
+                (d[j] - 2.0 * dt).abs() < 1e-12,
+                "row {j}: {} m in {dt} s",
+                d[j]
+            );
+        }
+        let said = distance_jumps(&log)
+            .describe("r.csv", &log.line, &log.t_s)
+            .expect("said");
+        assert!(
+            said.contains("1 speed sample faster than 100 m/s"),
+            "{said}"
+        );
     }
 
     /// A stand inside a gap of the GNSS speed, told by the gyro's shaking:

@@ -293,3 +293,72 @@ fn a_pause_in_the_log_is_refused_with_the_windows_either_side() {
     .expect("parse");
     assert_eq!((&log.t_s, &log.fix), (&first.t_s, &first.fix));
 }
+
+/// A cumulative odometer zeroed half-way through the real comma drive (a
+/// trip meter reset, a logger restarting) runs on across the reset: the
+/// path is the unedited drive's to the millimetre, and the fit and the
+/// check both name the reset's line. Read as distance, the 517 m step back
+/// made the fit fail as "not physical" (odometer gain 1.38, the sensor
+/// upside down) while the check read the odometer as fine.
+#[test]
+fn an_odometer_reset_mid_ride_is_no_distance() {
+    let drive = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    ))
+    .expect("the bundled comma drive");
+    let lines: Vec<&str> = drive.lines().collect();
+    let header = lines
+        .iter()
+        .position(|l| l.starts_with("t_s"))
+        .expect("a header");
+    let column = lines[header]
+        .split(',')
+        .position(|c| c == "odo_m")
+        .expect("odo_m");
+    let rows = lines.len() - header - 1;
+    let reset_at = header + 1 + rows / 2;
+    let odo = |i: usize| -> f64 {
+        lines[i]
+            .split(',')
+            .nth(column)
+            .and_then(|f| f.parse().ok())
+            .expect("odo_m")
+    };
+    let (before, base) = (odo(reset_at - 1), odo(reset_at));
+    let mut reset = String::new();
+    for (i, line) in lines.iter().enumerate() {
+        if i >= reset_at {
+            let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+            if let Ok(o) = f[column].parse::<f64>() {
+                f[column] = format!("{:.3}", o - base);
+            }
+            reset.push_str(&f.join(","));
+        } else {
+            reset.push_str(line);
+        }
+        reset.push('\n');
+    }
+    let (path, rms, warnings) = fitted(&reset);
+    let (clean, clean_rms, _) = fitted(&drive);
+    let worst = path
+        .iter()
+        .zip(&clean)
+        .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
+        .fold(0.0, f64::max);
+    assert!(worst < 0.01, "paths {worst} m apart");
+    assert!(
+        (rms - clean_rms).abs() < 0.001,
+        "{rms} against {clean_rms} m"
+    );
+    let said =
+        format!("the odometer jumps 1 time by more than a vehicle moves (up to -{before:.1} m");
+    let line = format!("the first on line {}, column 'odo_m'", reset_at + 1);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains(&said) && w.contains(&line)),
+        "{warnings:?}\n{said}\n{line}"
+    );
+    check_says(&reset, "odometer jumps", &line);
+}

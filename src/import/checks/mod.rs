@@ -202,6 +202,10 @@ pub fn check(log: &RideLog) -> CheckReport {
         return report;
     }
     saturation(log, &mut report);
+    if let Some(w) = crate::signals::distance_jumps(log).describe(&log.source, &log.line, &log.t_s)
+    {
+        report.say("odometer jumps", Level::Warning, w);
+    }
     let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
