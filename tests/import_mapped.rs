@@ -315,3 +315,47 @@ fn without_an_accuracy_the_hdop_weighs_the_fixes() {
         "{v:?}"
     );
 }
+
+/// A phone app stopped in the middle of writing its location file (no line
+/// end after the last row, which is short): that row is left out with a
+/// warning naming its line, and the rest of the ride loads. Before, the
+/// whole ride was refused for that one unfinished row.
+#[test]
+fn a_location_file_cut_short_loses_its_last_row_only() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(mapped("phone-location.csv")).unwrap();
+    let cut = dir.path().join("cut.csv");
+    std::fs::write(&cut, &text[..text.len() - 15]).unwrap();
+    let opened = import::open(
+        &mapped("phone-gyro.csv"),
+        &ImportOptions {
+            map: Some(mapped("phone.toml")),
+            gps: Some(cut.clone()),
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap();
+    assert_eq!(opened.log.fix_count(), 180);
+    let lines = text.lines().count();
+    assert!(
+        opened
+            .log
+            .warnings
+            .iter()
+            .any(|w| w.starts_with(&format!("{}:{lines}: ", cut.display()))
+                && w.contains("the last line is left out: it has no line end")),
+        "{:?}",
+        opened.log.warnings
+    );
+    // With its line end, the short row is bad input, as any other.
+    std::fs::write(&cut, format!("{}\n", &text[..text.len() - 15])).unwrap();
+    let refused = import::open(
+        &mapped("phone-gyro.csv"),
+        &ImportOptions {
+            map: Some(mapped("phone.toml")),
+            gps: Some(cut),
+            ..ImportOptions::default()
+        },
+    );
+    assert!(refused.is_err());
+}

@@ -142,6 +142,8 @@ struct Table {
     names: Vec<String>,
     lines: Vec<u64>,
     values: Vec<Vec<Option<f64>>>,
+    /// The warning that the last line, cut short, is left out (see `csv_rows`).
+    cut: Option<String>,
 }
 
 impl Table {
@@ -151,7 +153,9 @@ impl Table {
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .comment(Some(b'#'))
-            .from_reader(std::io::BufReader::with_capacity(1 << 20, f));
+            .from_reader(super::csv_rows::LastByte::new(
+                std::io::BufReader::with_capacity(1 << 20, f),
+            ));
         let headers = reader
             .headers()
             .map_err(|e| LoadError::Line {
@@ -184,34 +188,45 @@ impl Table {
         }
         let mut values = vec![Vec::new(); names.len()];
         let mut lines = Vec::new();
-        for record in reader.records() {
-            let record = record.map_err(|e| LoadError::Line {
-                file: file.clone(),
-                line: e.position().map_or(0, |p| p.line()),
-                message: format!("cannot read the row: {e}"),
-            })?;
-            let line = record.position().map_or(0, |p| p.line());
-            for (k, &i) in index.iter().enumerate() {
-                let s = record.get(i).unwrap_or("");
-                let v = if s.is_empty() {
-                    None
-                } else {
-                    match s.parse::<f64>() {
-                        Ok(v) if v.is_finite() => Some(v),
-                        _ => {
-                            return Err(LoadError::Field {
-                                file: file.clone(),
-                                line,
-                                column: names[k].clone(),
-                                message: format!("'{s}' is not a finite number"),
-                            });
+        let cut = super::csv_rows::each_record(
+            &mut reader,
+            |reader, record| {
+                reader
+                    .read_byte_record(record)
+                    .map_err(|e| LoadError::Line {
+                        file: file.clone(),
+                        line: e.position().map_or(0, |p| p.line()),
+                        message: format!("cannot read the row: {e}"),
+                    })
+            },
+            |record| {
+                let line = record.position().map_or(0, |p| p.line());
+                let mut row = Vec::with_capacity(index.len());
+                for (k, &i) in index.iter().enumerate() {
+                    let s = std::str::from_utf8(record.get(i).unwrap_or(b"")).unwrap_or("?");
+                    row.push(if s.is_empty() {
+                        None
+                    } else {
+                        match s.parse::<f64>() {
+                            Ok(v) if v.is_finite() => Some(v),
+                            _ => {
+                                return Err(LoadError::Field {
+                                    file: file.clone(),
+                                    line,
+                                    column: names[k].clone(),
+                                    message: format!("'{s}' is not a finite number"),
+                                });
+                            }
                         }
-                    }
-                };
-                values[k].push(v);
-            }
-            lines.push(line);
-        }
+                    });
+                }
+                for (column, v) in values.iter_mut().zip(row) {
+                    column.push(v);
+                }
+                lines.push(line);
+                Ok(())
+            },
+        )?;
         if lines.is_empty() {
             return Err(LoadError::File {
                 file,
@@ -223,6 +238,7 @@ impl Table {
             names,
             lines,
             values,
+            cut,
         })
     }
 
@@ -448,6 +464,7 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
         ],
         ..Streams::default()
     };
+    streams.warnings.extend(main.cut.clone());
     let dropped = times.iter().filter(|t| t.is_none()).count();
     if dropped > 0 {
         streams.warnings.push(format!(
@@ -487,6 +504,7 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
                 w.push(&odo.column);
             }
             gps_table = Table::read(p, &w)?;
+            streams.warnings.extend(gps_table.cut.clone());
             let t = gps_table.times(time_col, &map.time.unit, map.time.offset_s)?;
             (&gps_table, t)
         }

@@ -17,6 +17,7 @@
 pub mod camera;
 pub mod checks;
 pub mod comma2k19;
+mod csv_rows;
 pub mod dataflash;
 pub mod fit;
 pub mod gnsslogger;

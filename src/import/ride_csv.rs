@@ -39,7 +39,9 @@ pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, Lo
         .has_headers(true)
         .flexible(false)
         .trim(csv::Trim::All)
-        .from_reader(std::io::Cursor::new(head.header).chain(input));
+        .from_reader(super::csv_rows::LastByte::new(
+            std::io::Cursor::new(head.header).chain(input),
+        ));
     let header_line = head.comment_lines + 1;
     let headers = reader
         .byte_headers()
@@ -52,10 +54,13 @@ pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, Lo
     let columns = Columns::bind(&headers, source, header_line)?;
     check_circumference(&columns, &head.metadata, source)?;
     let mut rows = RowReader::new(&columns, source, head.comment_lines, head.metadata);
-    let mut record = csv::ByteRecord::new();
-    while rows.read(&mut reader, &mut record)? {
-        rows.push(&record)?;
-    }
+    let comment_lines = head.comment_lines;
+    let cut = super::csv_rows::each_record(
+        &mut reader,
+        |reader, record| read_row(reader, record, source, comment_lines),
+        |record| rows.push(record),
+    )?;
+    rows.log.warnings.extend(cut);
     rows.finish()
 }
 
@@ -356,6 +361,32 @@ fn check_circumference(
     }
 }
 
+/// Read the next record of a log whose header follows `comment_lines`
+/// comments; `false` at the end of the input.
+fn read_row(
+    reader: &mut csv::Reader<impl Read>,
+    record: &mut csv::ByteRecord,
+    file: &str,
+    comment_lines: u64,
+) -> Result<bool, LoadError> {
+    reader.read_byte_record(record).map_err(|e| {
+        let line = e
+            .position()
+            .map_or(comment_lines + 1, |p| p.line() + comment_lines);
+        let message = match e.kind() {
+            csv::ErrorKind::UnequalLengths {
+                expected_len, len, ..
+            } => format!("row has {len} fields, the header has {expected_len}"),
+            _ => format!("cannot read the row: {e}"),
+        };
+        LoadError::Line {
+            file: file.to_string(),
+            line,
+            message,
+        }
+    })
+}
+
 /// Parses rows one at a time into the columns of a [`RideLog`].
 struct RowReader<'c> {
     columns: &'c Columns,
@@ -404,30 +435,6 @@ impl<'c> RowReader<'c> {
             extra_values: vec![Vec::new(); columns.extra.len()],
             prev_t: f64::NEG_INFINITY,
         }
-    }
-
-    /// Read the next record; `false` at the end of the input.
-    fn read(
-        &self,
-        reader: &mut csv::Reader<impl Read>,
-        record: &mut csv::ByteRecord,
-    ) -> Result<bool, LoadError> {
-        reader.read_byte_record(record).map_err(|e| {
-            let line = e
-                .position()
-                .map_or(self.comment_lines + 1, |p| p.line() + self.comment_lines);
-            let message = match e.kind() {
-                csv::ErrorKind::UnequalLengths {
-                    expected_len, len, ..
-                } => format!("row has {len} fields, the header has {expected_len}"),
-                _ => format!("cannot read the row: {e}"),
-            };
-            LoadError::Line {
-                file: self.file.clone(),
-                line,
-                message,
-            }
-        })
     }
 
     fn field_err(&self, line: u64, column: &str, message: String) -> LoadError {
@@ -842,6 +849,34 @@ mod tests {
             })
             .collect::<Vec<_>>()
             .join("\n")
+    }
+
+    /// A logger that stopped in the middle of writing its last row leaves a
+    /// line without its end: that row is left out with a warning, wherever
+    /// it was cut, and the rows before it are the log. A short last row
+    /// that has its line end is bad input.
+    #[test]
+    fn a_last_row_cut_short_is_left_out_with_a_warning() {
+        let whole = parse(GOOD.as_bytes(), "ex.csv").unwrap();
+        for cut in [GOOD.len() - 8, GOOD.len() - 36, GOOD.len() - 40] {
+            let log = parse(&GOOD.as_bytes()[..cut], "ex.csv").unwrap();
+            assert_eq!(log.t_s, whole.t_s[..2], "cut at {cut}");
+            assert_eq!(log.warnings.len(), 1, "{:?}", log.warnings);
+            assert!(
+                log.warnings[0].starts_with("ex.csv:6: ")
+                    && log.warnings[0].ends_with("the last line is left out: it has no line end, as when a logger stops in the middle of writing a row"),
+                "{:?}",
+                log.warnings
+            );
+        }
+        let short = GOOD.replace(",136.05,16.6\n", "\n");
+        assert_eq!(
+            err(&short),
+            "bad.csv:6: row has 8 fields, the header has 10"
+        );
+        // A bad row before the last is an error whether or not the file ends in a line end.
+        let bad = GOOD.replace("0.17500", "abc");
+        assert!(err(&bad[..bad.len() - 1]).starts_with("bad.csv:5: column 'gx_dps'"));
     }
 
     #[test]
