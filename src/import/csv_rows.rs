@@ -39,13 +39,13 @@ impl<R: Read> Read for LastByte<R> {
 
 /// Every record of `reader` passed to `row`, in order: `read` takes the
 /// next record (`false` at the end; its error names the line), `row` takes
-/// a record in. Where the input ends without a line end and its last record
+/// a record in, with the record before it (`None` for the first). Where the input ends without a line end and its last record
 /// cannot be read or `row` refuses it, that record is left out and the
 /// warning saying so is returned.
 pub(crate) fn each_record<R: Read>(
     reader: &mut csv::Reader<LastByte<R>>,
     read: impl Fn(&mut csv::Reader<LastByte<R>>, &mut csv::ByteRecord) -> Result<bool, LoadError>,
-    mut row: impl FnMut(&csv::ByteRecord) -> Result<(), LoadError>,
+    mut row: impl FnMut(&csv::ByteRecord, Option<&csv::ByteRecord>) -> Result<(), LoadError>,
 ) -> Result<Option<String>, LoadError> {
     let left_out = |error: LoadError| {
         Some(format!(
@@ -54,19 +54,24 @@ pub(crate) fn each_record<R: Read>(
     };
     let mut record = csv::ByteRecord::new();
     let mut ahead = csv::ByteRecord::new();
+    let mut before = csv::ByteRecord::new();
+    let mut first = true;
     let mut current = read(reader, &mut record);
     loop {
         current = match current {
             Ok(false) => return Ok(None),
             Ok(true) => {
                 let next = read(reader, &mut ahead);
-                match row(&record) {
+                match row(&record, (!first).then_some(&before)) {
                     Err(e) if matches!(next, Ok(false)) && reader.get_ref().cut_short() => {
                         return Ok(left_out(e));
                     }
                     taken => taken?,
                 }
+                // before <- record <- ahead, and `ahead` free for the next read.
+                std::mem::swap(&mut before, &mut record);
                 std::mem::swap(&mut record, &mut ahead);
+                first = false;
                 next
             }
             Err(e) => match read(reader, &mut ahead) {

@@ -199,7 +199,7 @@ impl Table {
                         message: format!("cannot read the row: {e}"),
                     })
             },
-            |record| {
+            |record, _| {
                 let line = record.position().map_or(0, |p| p.line());
                 let mut row = Vec::with_capacity(index.len());
                 for (k, &i) in index.iter().enumerate() {

@@ -58,7 +58,7 @@ pub fn parse_reader(mut input: impl BufRead, source: &str) -> Result<RideLog, Lo
     let cut = super::csv_rows::each_record(
         &mut reader,
         |reader, record| read_row(reader, record, source, comment_lines),
-        |record| rows.push(record),
+        |record, before| rows.push(record, before),
     )?;
     rows.log.warnings.extend(cut);
     rows.finish()
@@ -397,6 +397,18 @@ struct RowReader<'c> {
     extra_numeric: Vec<Option<bool>>,
     extra_values: Vec<Vec<Option<f64>>>,
     prev_t: f64,
+    repeats: Repeats,
+}
+
+/// Rows that repeat the row before them exactly, field by field: a logger
+/// that wrote a buffer twice (SD-card loggers do on a slow card), or an
+/// export appended twice. They hold nothing new, so they are dropped and
+/// counted; a row at the same time with other values is still an error,
+/// since which of the two holds is not known.
+#[derive(Default)]
+struct Repeats {
+    count: usize,
+    first_line: u64,
 }
 
 impl<'c> RowReader<'c> {
@@ -434,6 +446,7 @@ impl<'c> RowReader<'c> {
             extra_numeric: vec![None; columns.extra.len()],
             extra_values: vec![Vec::new(); columns.extra.len()],
             prev_t: f64::NEG_INFINITY,
+            repeats: Repeats::default(),
         }
     }
 
@@ -446,8 +459,12 @@ impl<'c> RowReader<'c> {
         }
     }
 
-    /// Parse one row into the log.
-    fn push(&mut self, record: &csv::ByteRecord) -> Result<(), LoadError> {
+    /// Parse one row into the log; `before` is the row read before it.
+    fn push(
+        &mut self,
+        record: &csv::ByteRecord,
+        before: Option<&csv::ByteRecord>,
+    ) -> Result<(), LoadError> {
         let c = self.columns;
         let line = record.position().map_or(0, |p| p.line()) + self.comment_lines;
         let row = Row {
@@ -456,6 +473,13 @@ impl<'c> RowReader<'c> {
             reader: self,
         };
         let t = row.required(c.t)?;
+        if t == self.prev_t && before.is_some_and(|b| b.iter().eq(record.iter())) {
+            if self.repeats.count == 0 {
+                self.repeats.first_line = line;
+            }
+            self.repeats.count += 1;
+            return Ok(());
+        }
         if t <= self.prev_t {
             return Err(self.field_err(
                 line,
@@ -552,6 +576,7 @@ impl<'c> RowReader<'c> {
         log.gyro_dps.push(g);
         log.fix.push(fix);
         self.prev_t = t;
+
         Ok(())
     }
 
@@ -600,6 +625,16 @@ impl<'c> RowReader<'c> {
 
     /// The log, once every row is read.
     fn finish(mut self) -> Result<RideLog, LoadError> {
+        if self.repeats.count > 0 {
+            self.log.warnings.push(format!(
+                "{}:{}: {} row{} repeat the row before them exactly (a logger that wrote a buffer twice) and {} dropped",
+                self.file,
+                self.repeats.first_line,
+                self.repeats.count,
+                if self.repeats.count == 1 { "" } else { "s" },
+                if self.repeats.count == 1 { "is" } else { "are" },
+            ));
+        }
         if self.log.t_s.is_empty() {
             return Err(LoadError::File {
                 file: self.file,
@@ -877,6 +912,26 @@ mod tests {
         // A bad row before the last is an error whether or not the file ends in a line end.
         let bad = GOOD.replace("0.17500", "abc");
         assert!(err(&bad[..bad.len() - 1]).starts_with("bad.csv:5: column 'gx_dps'"));
+    }
+
+    /// A row written twice, field for field, is dropped and counted; a row
+    /// at the same time with other values is still an error.
+    #[test]
+    fn a_row_written_twice_is_dropped_and_said() {
+        let row = "0.01,0.17500,0.00875,0.23625,0,,,,136.01,16.6\n";
+        let twice = GOOD.replace(row, &format!("{row}{row}{row}"));
+        let log = parse(twice.as_bytes(), "ex.csv").unwrap();
+        let good = parse(GOOD.as_bytes(), "ex.csv").unwrap();
+        assert_eq!((&log.t_s, &log.gyro_dps), (&good.t_s, &good.gyro_dps));
+        assert_eq!(log.line, vec![4, 5, 8]);
+        assert_eq!(
+            log.warnings,
+            vec![
+                "ex.csv:6: 2 rows repeat the row before them exactly (a logger that wrote a buffer twice) and are dropped"
+            ]
+        );
+        let other = GOOD.replace(row, &format!("{row}{}", row.replace("16.6", "16.7")));
+        assert!(err(&other).starts_with("bad.csv:6: column 't_s': time 0.01 does not increase"));
     }
 
     #[test]
