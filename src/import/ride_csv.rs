@@ -398,6 +398,8 @@ struct RowReader<'c> {
     extra_values: Vec<Vec<Option<f64>>>,
     prev_t: f64,
     repeats: Repeats,
+    /// Rows with all three gyro fields empty (see [`RowReader::fill_gyro`]).
+    no_gyro: Vec<usize>,
 }
 
 /// Rows that repeat the row before them exactly, field by field: a logger
@@ -447,6 +449,7 @@ impl<'c> RowReader<'c> {
             extra_values: vec![Vec::new(); columns.extra.len()],
             prev_t: f64::NEG_INFINITY,
             repeats: Repeats::default(),
+            no_gyro: Vec::new(),
         }
     }
 
@@ -487,11 +490,19 @@ impl<'c> RowReader<'c> {
                 format!("time {t} does not increase (previous row {})", self.prev_t),
             ));
         }
-        let g = [
-            row.required(c.gyro[0])?,
-            row.required(c.gyro[1])?,
-            row.required(c.gyro[2])?,
-        ];
+        let g = match [
+            row.number(c.gyro[0])?,
+            row.number(c.gyro[1])?,
+            row.number(c.gyro[2])?,
+        ] {
+            [Some(x), Some(y), Some(z)] => [x, y, z],
+            [None, None, None] => [f64::NAN; 3],
+            _ => [
+                row.required(c.gyro[0])?,
+                row.required(c.gyro[1])?,
+                row.required(c.gyro[2])?,
+            ],
+        };
         let fix = row.fix()?;
         let pulse = match c.pulse {
             Some(i) => Some(match row.text(i)? {
@@ -573,6 +584,9 @@ impl<'c> RowReader<'c> {
         }
         log.line.push(line);
         log.t_s.push(t);
+        if g[0].is_nan() {
+            self.no_gyro.push(log.gyro_dps.len());
+        }
         log.gyro_dps.push(g);
         log.fix.push(fix);
         self.prev_t = t;
@@ -623,6 +637,72 @@ impl<'c> RowReader<'c> {
         Ok(out)
     }
 
+    /// Rows without a gyro sample (all three fields empty) get the rate of
+    /// the sample that covers their time. Such rows come from another stream
+    /// merged in by time (an outer join of the IMU's and the receiver's
+    /// exports puts each fix on a row of its own); refusing them refused
+    /// the ride. Under the format's mean rates the row at `t_k` holds the
+    /// mean over `(t_{k-1}, t_k]`, so the next sample's rate covers every row
+    /// between it and the sample before (`g_j = g_next`, the same rotation
+    /// over the same time); instantaneous samples are interpolated linearly
+    /// in time. Either way the rotation integrated is the gyro's own.
+    fn fill_gyro(&mut self) -> Result<(), LoadError> {
+        let empty = std::mem::take(&mut self.no_gyro);
+        let Some(&first) = empty.first() else {
+            return Ok(());
+        };
+        let n = self.log.gyro_dps.len();
+        let column = &self.columns.names[self.columns.gyro[0]];
+        if empty.len() == n {
+            return Err(self.field_err(
+                self.log.line[first],
+                column,
+                "empty on every row: the log has no gyro sample".into(),
+            ));
+        }
+        let instantaneous = self
+            .log
+            .metadata
+            .get("gyro_samples")
+            .is_some_and(|v| v.trim() == "instantaneous");
+        let (t, g) = (&self.log.t_s, &mut self.log.gyro_dps);
+        let mut longest = 0.0f64;
+        let mut k = 0;
+        while k < empty.len() {
+            // The run of empty rows a..=b, and the samples either side.
+            let a = empty[k];
+            let mut b = a;
+            while k + 1 < empty.len() && empty[k + 1] == b + 1 {
+                k += 1;
+                b += 1;
+            }
+            k += 1;
+            let before = a.checked_sub(1);
+            let after = (b + 1 < n).then_some(b + 1);
+            longest = longest.max(t[after.unwrap_or(b)] - t[before.unwrap_or(a)]);
+            for j in a..=b {
+                g[j] = match (before, after) {
+                    (Some(p), Some(q)) if instantaneous => {
+                        let w = (t[j] - t[p]) / (t[q] - t[p]);
+                        [0, 1, 2].map(|i| g[p][i] + w * (g[q][i] - g[p][i]))
+                    }
+                    (_, Some(q)) => g[q],
+                    (Some(p), None) => g[p],
+                    (None, None) => unreachable!("a log with a gyro sample has one either side"),
+                };
+            }
+        }
+        self.log.warnings.push(format!(
+            "{}:{}: {} row{} no gyro sample (the rows of another stream merged in by time, such as the fixes): each takes the rate of the sample that covers its time ({}), the longest stretch {longest:.3} s",
+            self.file,
+            self.log.line[first],
+            empty.len(),
+            if empty.len() == 1 { " has" } else { "s have" },
+            if instantaneous { "interpolated" } else { "the next sample's mean rate" },
+        ));
+        Ok(())
+    }
+
     /// The log, once every row is read.
     fn finish(mut self) -> Result<RideLog, LoadError> {
         if self.repeats.count > 0 {
@@ -641,6 +721,7 @@ impl<'c> RowReader<'c> {
                 message: "the log has a header but no data rows".into(),
             });
         }
+        self.fill_gyro()?;
         for (k, &c) in self.columns.extra.iter().enumerate() {
             if self.extra_numeric[k] != Some(false) {
                 self.log.channels.push((
@@ -912,6 +993,50 @@ mod tests {
         // A bad row before the last is an error whether or not the file ends in a line end.
         let bad = GOOD.replace("0.17500", "abc");
         assert!(err(&bad[..bad.len() - 1]).starts_with("bad.csv:5: column 'gx_dps'"));
+    }
+
+    /// A fix merged in on a row of its own (the gyro fields empty) takes
+    /// the rate of the gyro sample that covers its time: the next one's
+    /// mean rate, or interpolated between instantaneous samples. One or two
+    /// empty gyro fields, or a log with no gyro sample, are errors.
+    #[test]
+    fn a_row_without_a_gyro_sample_takes_the_rate_that_covers_it() {
+        let merged = GOOD.replace(
+            "0.01,0.17500",
+            "0.005,,,,0,47.49788890,19.04019790,95.8,,\n0.01,0.17500",
+        );
+        let log = parse(merged.as_bytes(), "ex.csv").unwrap();
+        assert_eq!(log.t_s, vec![0.0, 0.005, 0.01, 0.02]);
+        assert_eq!(log.gyro_dps[1], log.gyro_dps[2]);
+        assert_eq!(log.fix_count(), 2);
+        assert_eq!(
+            log.warnings,
+            vec![
+                "ex.csv:5: 1 row has no gyro sample (the rows of another stream merged in by time, such as the fixes): each takes the rate of the sample that covers its time (the next sample's mean rate), the longest stretch 0.010 s"
+            ]
+        );
+        let instantaneous = merged.replace(
+            "# wheel_circumference_m",
+            "# gyro_samples: instantaneous\n# wheel_circumference_m",
+        );
+        let log = parse(instantaneous.as_bytes(), "ex.csv").unwrap();
+        for i in 0..3 {
+            let mid = 0.5 * (log.gyro_dps[0][i] + log.gyro_dps[2][i]);
+            assert!((log.gyro_dps[1][i] - mid).abs() < 1e-12);
+        }
+        let partly = GOOD.replace("0.01,0.17500,0.00875", "0.01,0.17500,");
+        assert_eq!(
+            err(&partly),
+            "bad.csv:5: column 'gy_dps': value is empty but the column needs one on every row"
+        );
+        let none = GOOD
+            .replace("0.12250,-0.31500,0.28000", ",,")
+            .replace("0.17500,0.00875,0.23625", ",,")
+            .replace("0.16625,-0.04375,0.19250", ",,");
+        assert_eq!(
+            err(&none),
+            "bad.csv:4: column 'gx_dps': empty on every row: the log has no gyro sample"
+        );
     }
 
     /// A row written twice, field for field, is dropped and counted; a row
