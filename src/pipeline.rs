@@ -78,6 +78,16 @@ pub enum PipelineError {
     Signals(#[from] crate::signals::SignalError),
 }
 
+impl PipelineError {
+    /// The windows either side of the log's longest pause, where a pause is what refused it.
+    pub fn pause_windows(&self) -> Option<[(f64, f64); 2]> {
+        match self {
+            Self::Signals(e) => e.pause_windows(),
+            _ => None,
+        }
+    }
+}
+
 /// What a finished fit is: a result, or a failure with its reasons.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Judgement {

@@ -28,6 +28,24 @@ pub enum SignalError {
         column: String,
         message: String,
     },
+    /// A pause in the log (see [`pause`]), with the time windows (log
+    /// clock, s) either side of its longest one, each of which can be fitted.
+    #[error("{file}: {message}")]
+    Pause {
+        file: String,
+        message: String,
+        windows: [(f64, f64); 2],
+    },
+}
+
+impl SignalError {
+    /// The windows either side of the log's longest pause, where a pause is what refused it.
+    pub fn pause_windows(&self) -> Option<[(f64, f64); 2]> {
+        match self {
+            Self::Pause { windows, .. } => Some(*windows),
+            _ => None,
+        }
+    }
 }
 
 /// The slowest gyro a path is integrated from (Hz, median rate): a vehicle
@@ -67,7 +85,7 @@ pub struct Fix {
 /// The longest gap in the log's rows that the gyro cannot be integrated
 /// across (see [`MAX_GAP_S`]), said with its line, its time and the
 /// `--between` windows of the ride on either side of it; `None` without one.
-pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<String> {
+pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<(String, [(f64, f64); 2])> {
     let (j, gap) = t
         .windows(2)
         .map(|w| w[1] - w[0])
@@ -79,7 +97,7 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<String> {
     let pauses = t.windows(2).filter(|w| w[1] - w[0] > MAX_GAP_S).count();
     let (before, after) = (t[j], t[j + 1]);
     let (first, last) = (t[0], t[t.len() - 1]);
-    Some(format!(
+    let message = format!(
         "the log pauses for {gap:.0} s after t = {before:.2} s (line {}){}: the gyro's turns across a pause are unknown, so the path cannot be carried over it; fit each side apart, --between {first},{before} and --between {after},{last}",
         line.get(j + 1).copied().unwrap_or(j as u64 + 2),
         if pauses > 1 {
@@ -87,7 +105,8 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<String> {
         } else {
             String::new()
         }
-    ))
+    );
+    Some((message, [(first, before), (after, last)]))
 }
 
 /// The longest gap between rows (s) across which the rotation is
@@ -432,8 +451,12 @@ impl Signals {
                 )));
             }
         };
-        if let Some(message) = pause(&t, &log.line) {
-            return Err(unusable(message));
+        if let Some((message, windows)) = pause(&t, &log.line) {
+            return Err(SignalError::Pause {
+                file,
+                message,
+                windows,
+            });
         }
         let (mut gyro, gaps) = step_rates(raw, &dt, instantaneous);
         let attitude = choose_attitude(log, &t, &gyro).map_err(&unusable)?;

@@ -828,3 +828,63 @@ fn the_bias_plot_shows_only_the_axes_the_model_estimates() {
         }
     }
 }
+
+/// A ride refused for a pause offers each side of it: the error bar has a
+/// button for the rows before the pause and one for those after, which
+/// loads that part (the Source panel says which rows, and "Whole log"
+/// reads them all again, refused as before). The command line's
+/// `--between`, as a user of the app reaches it.
+#[test]
+fn a_ride_refused_for_a_pause_offers_each_side_of_it() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let paused = dir.path().join("paused.csv");
+    let sample = std::str::from_utf8(gyropath::app::SAMPLE_RIDE).expect("utf8");
+    let mut header_seen = false;
+    let mut text = String::new();
+    for line in sample.lines() {
+        if line.starts_with('#') || !header_seen {
+            header_seen |= !line.starts_with('#');
+            text.push_str(line);
+        } else {
+            let (t, rest) = line.split_once(',').expect("a row");
+            let t: f64 = t.parse().expect("t_s");
+            let t = if t > 300.0 { t + 120.0 } else { t };
+            text.push_str(&format!("{t:.2},{rest}"));
+        }
+        text.push('\n');
+    }
+    std::fs::write(&paused, text).expect("write");
+    let app = GyropathApp::new(
+        manual_settings(),
+        gyropath::app::worker::RideSource::file(paused),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .error
+        .is_some()));
+    let error = h.state().error.clone().expect("error");
+    assert!(
+        error.contains("the log pauses for 120 s after t = 300.00 s"),
+        "{error}"
+    );
+    h.get_by_label("Fit before the pause (0-300 s)");
+    h.get_by_label("Fit after the pause (420-720 s)").click();
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .ride
+            .as_ref()
+            .is_some_and(|r| a.loading.is_none() && r.duration_s < 301.0)),
+        "not loaded: {:?}",
+        h.state().error
+    );
+    assert!(h.state().error.is_none() && h.state().retry.is_empty());
+    let rows = h.state().ride.as_ref().expect("ride").rows;
+    assert_eq!(rows, 30_000);
+    h.get_by_label("rows from 420.01 to 720.00 s of the log");
+    h.get_by_label("Whole log").click();
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .error
+        .is_some()));
+    h.get_by_label("Fit before the pause (0-300 s)");
+}

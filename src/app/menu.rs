@@ -101,6 +101,11 @@ impl GyropathApp {
                     egui::Color32::from_rgb(255, 110, 110),
                     format!("Error: {e}"),
                 );
+                for (label, source) in &self.retry {
+                    if ui.button(label).clicked() {
+                        commands.push(Command::Open(source.clone()));
+                    }
+                }
                 if ui.small_button("Dismiss").clicked() {
                     commands.push(Command::DismissError);
                 }

@@ -148,6 +148,8 @@ pub struct GyropathApp {
     pub running: bool,
     pub loading: Option<String>,
     pub error: Option<String>,
+    /// What the error offers instead (a ride refused for a pause: each side of it).
+    pub retry: Vec<(String, RideSource)>,
     pub status: Option<String>,
     pub history: Vec<HistoryRow>,
     pub diagnosis: Option<crate::diagnosis::Diagnosis>,
@@ -230,6 +232,7 @@ impl GyropathApp {
             running: false,
             loading: None,
             error: None,
+            retry: Vec::new(),
             status: None,
             history: Vec::new(),
             diagnosis: None,
@@ -255,6 +258,7 @@ impl GyropathApp {
                 Update::Loaded(view) => {
                     self.loading = None;
                     self.error = None;
+                    self.retry.clear();
                     if let RideSource::Path(p, _) = &view.source {
                         self.settings.recent.retain(|r| r != p);
                         self.settings.recent.insert(0, p.clone());
@@ -270,10 +274,11 @@ impl GyropathApp {
                         self.worker.send(Request::Run);
                     }
                 }
-                Update::LoadFailed(e) => {
+                Update::LoadFailed { message, retry } => {
                     self.loading = None;
                     self.run_on_load = false;
-                    self.error = Some(format!("could not load the ride: {e}"));
+                    self.error = Some(format!("could not load the ride: {message}"));
+                    self.retry = retry;
                 }
                 Update::Snapshot(s) => {
                     self.record_history(&s);
@@ -482,7 +487,10 @@ impl GyropathApp {
                 self.worker
                     .send(Request::Settings(self.settings.fit.clone()));
             }
-            Command::DismissError => self.error = None,
+            Command::DismissError => {
+                self.error = None;
+                self.retry.clear();
+            }
             Command::Diagnose => {
                 self.diagnosing = Some("starting".into());
                 self.worker.send(Request::Diagnose);

@@ -124,6 +124,18 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         ui.label(format!("distance: {}", ride.distance));
     }
     wheel_ui(ui, path, options, commands);
+    if let Some((start, end)) = options.between {
+        ui.horizontal(|ui| {
+            ui.label(format!("rows from {start:.2} to {end:.2} s of the log"));
+            if ui
+                .button("Whole log")
+                .on_hover_text("Read every row of the log again (a pause in it refuses the whole)")
+                .clicked()
+            {
+                commands.push(reload(path, options, |o| o.between = None));
+            }
+        });
+    }
     checks_ui(ui, ride);
 }
 

@@ -22,7 +22,7 @@ use crate::import::ReferenceTrack;
 use crate::import::{self, ImportOptions, MountChoice, SourceKind};
 use crate::model::Model;
 use crate::optimisation::{FitSettings, FitStats, IterationReport, Phase, Reconstruction};
-use crate::pipeline;
+use crate::pipeline::{self, PipelineError};
 use crate::signals::Signals;
 
 /// At most this many path points go to the UI per snapshot.
@@ -55,6 +55,17 @@ impl RideSource {
     /// The same file read again with `fit`'s wheel distance as its odometer
     /// (the distance choice back to auto, which a wheel distance needs);
     /// `None` for bytes in memory, which have no UTC start to match by.
+    /// The same file with only its rows from `window.0` to `window.1` s
+    /// (the log's clock; `--between`); `None` for bytes in memory.
+    pub fn between(&self, window: (f64, f64)) -> Option<Self> {
+        let Self::Path(path, options) = self else {
+            return None;
+        };
+        let mut options = options.clone();
+        options.between = Some(window);
+        Some(Self::Path(path.clone(), options))
+    }
+
     pub fn with_wheel(&self, fit: PathBuf) -> Option<Self> {
         let Self::Path(path, options) = self else {
             return None;
@@ -192,7 +203,12 @@ pub enum Update {
     Loading(String),
     Loaded(Box<RideView>),
     /// The ride could not be loaded; the previous one (if any) stays.
-    LoadFailed(String),
+    /// `retry`: the same file read otherwise, each with a button's label
+    /// (either side of a pause that refused it).
+    LoadFailed {
+        message: String,
+        retry: Vec<(String, RideSource)>,
+    },
     Snapshot(Box<Snapshot>),
     Running(bool),
     /// A setting was refused or an export failed.
@@ -425,14 +441,29 @@ impl Worker {
             RideSource::Bytes { name, bytes } => import::parse(bytes, name)
                 .map(|log| import::checked(log, SourceKind::RideCsv, None, &MountChoice::Default)),
         };
-        let (signals, origin) = match imported.map_err(|e| e.to_string()).and_then(|im| {
+        let (signals, origin) = match imported.map_err(PipelineError::from).and_then(|im| {
             let origin = Origin::of(&im);
-            let s = pipeline::signals(im).map_err(|e| e.to_string())?;
-            Ok((s, origin))
+            Ok((pipeline::signals(im)?, origin))
         }) {
             Ok(v) => v,
             Err(e) => {
-                self.send(Update::LoadFailed(e));
+                let retry = e
+                    .pause_windows()
+                    .map(|windows| {
+                        windows
+                            .iter()
+                            .zip(["before the pause", "after the pause"])
+                            .filter_map(|(&w, side)| {
+                                let label = format!("Fit {side} ({:.0}-{:.0} s)", w.0, w.1);
+                                Some((label, source.between(w)?))
+                            })
+                            .collect()
+                    })
+                    .unwrap_or_default();
+                self.send(Update::LoadFailed {
+                    message: e.to_string(),
+                    retry,
+                });
                 return;
             }
         };

@@ -36,7 +36,7 @@ pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) -> bool {
             prec = if rate < 1.0 { 3 } else { 1 },
         ),
     );
-    if let Some(pause) = crate::signals::pause(&log.t_s, &log.line) {
+    if let Some((pause, _)) = crate::signals::pause(&log.t_s, &log.line) {
         report.say("pause", Level::Problem, pause);
     }
     rate >= crate::signals::MIN_GYRO_RATE_HZ
