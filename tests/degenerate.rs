@@ -144,6 +144,14 @@ fn fitted(csv: &str) -> (Vec<[f64; 3]>, f64, Vec<String>) {
     (path, rec.stats().rms_horizontal_m, warnings)
 }
 
+/// The largest horizontal distance (m) between two paths, row by row.
+fn farthest_apart(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p[0] - q[0]).hypot(p[1] - q[1]))
+        .fold(0.0, f64::max)
+}
+
 /// Asserts that `gyropath check` of `csv` has a verdict on `subject` whose
 /// message contains `text`.
 fn check_says(csv: &str, subject: &str, text: &str) {
@@ -190,11 +198,7 @@ fn gross_gps_blunders_are_left_out_as_if_never_logged() {
     let line = first_row.get().expect("a blunder") + comments + 2;
     let (path, rms, warnings) = fitted(&with);
     let (clean, clean_rms, _) = fitted(&without);
-    let worst = path
-        .iter()
-        .zip(&clean)
-        .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
-        .fold(0.0, f64::max);
+    let worst = farthest_apart(&path, &clean);
     assert!(worst < 1e-9, "paths {worst} m apart");
     assert_eq!(rms, clean_rms);
     assert!(rms < 10.0, "{rms} m from the fixes");
@@ -341,11 +345,7 @@ fn an_odometer_reset_mid_ride_is_no_distance() {
     }
     let (path, rms, warnings) = fitted(&reset);
     let (clean, clean_rms, _) = fitted(&drive);
-    let worst = path
-        .iter()
-        .zip(&clean)
-        .map(|(a, b)| (a[0] - b[0]).hypot(a[1] - b[1]))
-        .fold(0.0, f64::max);
+    let worst = farthest_apart(&path, &clean);
     assert!(worst < 0.01, "paths {worst} m apart");
     assert!(
         (rms - clean_rms).abs() < 0.001,

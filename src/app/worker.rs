@@ -52,9 +52,6 @@ impl RideSource {
         }
     }
 
-    /// The same file read again with `fit`'s wheel distance as its odometer
-    /// (the distance choice back to auto, which a wheel distance needs);
-    /// `None` for bytes in memory, which have no UTC start to match by.
     /// The same file with only its rows from `window.0` to `window.1` s
     /// (the log's clock; `--between`); `None` for bytes in memory.
     pub fn between(&self, window: (f64, f64)) -> Option<Self> {
@@ -66,6 +63,9 @@ impl RideSource {
         Some(Self::Path(path.clone(), options))
     }
 
+    /// The same file read again with `fit`'s wheel distance as its odometer
+    /// (the distance choice back to auto, which a wheel distance needs);
+    /// `None` for bytes in memory, which have no UTC start to match by.
     pub fn with_wheel(&self, fit: PathBuf) -> Option<Self> {
         let Self::Path(path, options) = self else {
             return None;
