@@ -75,8 +75,13 @@ impl Jumps {
             )
         } else {
             format!(
-                "{n} speed sample{} faster than {V_MAX_MPS:.0} m/s either way (up to {:.1} m/s: an invalid-value code or a corrupt sample; {at}) read as empty, interpolated from the samples either side",
+                "{n} speed sample{} faster than {V_MAX_MPS:.0} m/s either way{} (up to {:.1} m/s: an invalid-value code or a corrupt sample; {at}) read as empty, interpolated from the samples either side",
                 if n == 1 { "" } else { "s" },
+                if self.column == "gps_speed_mps" {
+                    " or negative (a ground speed has no sign; iOS writes -1 where it has none)"
+                } else {
+                    ""
+                },
                 self.largest,
             )
         };
@@ -138,8 +143,12 @@ pub fn cumulative(t: &[f64], odo: &[Option<f64>]) -> (Vec<Option<f64>>, Jumps) {
 }
 
 /// `speed` (m/s, named `column`) with its samples faster than
-/// [`V_MAX_MPS`] either way left empty, and those samples.
+/// [`V_MAX_MPS`] either way left empty, and those samples. A GNSS ground
+/// speed (`gps_speed_mps`) has no sign, so a negative one is no speed
+/// either: iOS writes -1 where it has none, which read as a speed ran the
+/// path backwards.
 pub fn speed(column: &'static str, speed: &[Option<f64>]) -> (Vec<Option<f64>>, Jumps) {
+    let ground = column == "gps_speed_mps";
     let mut jumps = Jumps {
         column,
         ..Jumps::default()
@@ -148,7 +157,7 @@ pub fn speed(column: &'static str, speed: &[Option<f64>]) -> (Vec<Option<f64>>, 
         .iter()
         .enumerate()
         .map(|(k, v)| match *v {
-            Some(v) if v.abs() > V_MAX_MPS => {
+            Some(v) if v.abs() > V_MAX_MPS || (ground && v < 0.0) => {
                 jumps.rows.push(k);
                 if v.abs() > jumps.largest.abs() {
                     jumps.largest = v;
@@ -267,6 +276,25 @@ mod tests {
         let (mended, jumps) = cumulative(&t, &odo);
         assert_eq!(jumps.rows, vec![300]);
         assert!(mended.iter().all(|o| *o == Some(5000.0)), "{mended:?}");
+    }
+
+    #[test]
+    fn a_negative_ground_speed_is_no_speed() {
+        let v = vec![Some(3.0), Some(-1.0), Some(-1.0), Some(4.0)];
+        let (out, jumps) = speed("gps_speed_mps", &v);
+        assert_eq!(out, vec![Some(3.0), None, None, Some(4.0)]);
+        assert_eq!(jumps.rows, vec![1, 2]);
+        let said = jumps
+            .describe("r.csv", &[2, 3, 4, 5], &[0.0, 1.0, 2.0, 3.0])
+            .expect("said");
+        assert!(
+            said.contains("or negative (a ground speed has no sign"),
+            "{said}"
+        );
+        // A wheel's forward speed is signed: reversing.
+        let (out, jumps) = speed("speed_mps", &v);
+        assert_eq!(out, v);
+        assert!(jumps.is_empty());
     }
 
     #[test]

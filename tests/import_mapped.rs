@@ -359,3 +359,53 @@ fn a_location_file_cut_short_loses_its_last_row_only() {
     );
     assert!(refused.is_err());
 }
+
+/// A phone that has no speed for ten seconds writes -1 there (iOS does):
+/// a ground speed has no sign, so those samples are left out and the speed
+/// interpolated across them, with a warning. Read as speeds, they ran the
+/// path backwards and the fit failed as "not physical".
+#[test]
+fn a_phones_minus_one_speed_is_no_speed() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(mapped("phone-location.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let speed = header.split(',').position(|c| c == "speed").unwrap();
+    let mut edited = format!("{header}\n");
+    for (i, line) in lines.enumerate() {
+        let mut f: Vec<&str> = line.split(',').collect();
+        if (60..70).contains(&i) {
+            f[speed] = "-1";
+        }
+        edited.push_str(&f.join(","));
+        edited.push('\n');
+    }
+    let location = dir.path().join("location.csv");
+    std::fs::write(&location, edited).unwrap();
+    let opened = import::open(
+        &mapped("phone-gyro.csv"),
+        &ImportOptions {
+            map: Some(mapped("phone.toml")),
+            gps: Some(location),
+            ..ImportOptions::default()
+        },
+    )
+    .unwrap();
+    assert!(
+        opened
+            .log
+            .warnings
+            .iter()
+            .any(|w| w
+                .contains("10 negative value(s) of the GPS file's speed column 'speed' left out")),
+        "{:?}",
+        opened.log.warnings
+    );
+    let speeds = opened.log.speed_mps.as_ref().expect("speed");
+    assert!(speeds.iter().flatten().all(|&v| v >= 0.0));
+    let sig = Arc::new(Signals::from_owned_log(opened.log).unwrap());
+    let mut fit = Reconstruction::new(sig, FitSettings::default()).unwrap();
+    fit.finish();
+    let rms = fit.stats().rms_horizontal_m;
+    assert!(rms < 3.0, "rms {rms}");
+}

@@ -535,11 +535,25 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
     } else {
         (&main, &times)
     };
-    let raw: Vec<(i64, f64)> = odo_times
+    let mut raw: Vec<(i64, f64)> = odo_times
         .iter()
         .zip(odo_table.column(&odo.column))
         .filter_map(|(t, v)| Some(((*t)?, (*v)?)))
         .collect();
+    // A speed from the GPS file is the receiver's ground speed, which has
+    // no sign: a negative one is its "none" (iOS writes -1), not reversing.
+    if odo.in_gps_file && odo.kind == "speed" {
+        let before = raw.len();
+        raw.retain(|&(_, v)| v >= 0.0);
+        if raw.len() < before {
+            streams.warnings.push(format!(
+                "{}: {} negative value(s) of the GPS file's speed column '{}' left out: a ground speed has no sign (iOS writes -1 where it has none)",
+                odo_table.file,
+                before - raw.len(),
+                odo.column
+            ));
+        }
+    }
     if odo.kind == "pulses" {
         // Reed-switch states: each rising edge is one revolution (the ride-log rule).
         let t: Vec<f64> = raw.iter().map(|&(t, _)| t as f64 * 1e-9).collect();
