@@ -27,6 +27,26 @@ pub enum ExportError {
         what: &'static str,
         choices: &'static str,
     },
+    #[error("{path}: cannot write: there is no folder {folder}")]
+    NoFolder { path: String, folder: String },
+}
+
+/// The folder an output named `path` goes into must exist: said before a
+/// fit, not after minutes of it (a 6-hour ride's fit was lost to a typo in
+/// `--out`'s folder). Standard output and special files have none to check.
+fn check_folder(path: &Path) -> Result<(), ExportError> {
+    if path.as_os_str() == "-" || is_special(path) {
+        return Ok(());
+    }
+    match path.parent() {
+        Some(folder) if !folder.as_os_str().is_empty() && !folder.is_dir() => {
+            Err(ExportError::NoFolder {
+                path: path.display().to_string(),
+                folder: folder.display().to_string(),
+            })
+        }
+        _ => Ok(()),
+    }
 }
 
 /// Write an output through `fill`, where the user said:
@@ -135,6 +155,7 @@ impl PathFormat {
         if path.as_os_str() == "-" || is_special(path) {
             return Ok(Self::Csv);
         }
+        check_folder(path)?;
         match extension(path).as_deref() {
             Some("csv") => Ok(Self::Csv),
             Some("gpx") => Ok(Self::Gpx),
@@ -150,8 +171,11 @@ impl PathFormat {
 
 /// A report output (JSON) must be named `.json`, `-` or a special file.
 pub fn check_report_name(path: &Path) -> Result<(), ExportError> {
-    if path.as_os_str() == "-" || is_special(path) || extension(path).as_deref() == Some("json") {
+    if path.as_os_str() == "-" || is_special(path) {
         return Ok(());
+    }
+    if extension(path).as_deref() == Some("json") {
+        return check_folder(path);
     }
     Err(ExportError::UnknownFormat {
         path: path.display().to_string(),
@@ -163,9 +187,11 @@ pub fn check_report_name(path: &Path) -> Result<(), ExportError> {
 /// An HTML report must be named `.html` or `.htm`, `-` or a special file.
 pub fn check_html_name(path: &Path) -> Result<(), ExportError> {
     let ext = extension(path);
-    if path.as_os_str() == "-" || is_special(path) || matches!(ext.as_deref(), Some("html" | "htm"))
-    {
+    if path.as_os_str() == "-" || is_special(path) {
         return Ok(());
+    }
+    if matches!(ext.as_deref(), Some("html" | "htm")) {
+        return check_folder(path);
     }
     Err(ExportError::UnknownFormat {
         path: path.display().to_string(),
@@ -832,10 +858,23 @@ mod tests {
 
     #[test]
     fn the_format_follows_the_extension() {
+        let dir = tempfile::tempdir().unwrap();
         assert_eq!(
-            PathFormat::of(Path::new("a/p.csv")).unwrap(),
+            PathFormat::of(&dir.path().join("p.csv")).unwrap(),
             PathFormat::Csv
         );
+        // A folder that is not there is said before any work is done.
+        for e in [
+            PathFormat::of(Path::new("no-such-folder/p.csv")).unwrap_err(),
+            check_report_name(Path::new("no-such-folder/r.json")).unwrap_err(),
+            check_html_name(Path::new("no-such-folder/r.html")).unwrap_err(),
+        ] {
+            assert!(
+                e.to_string()
+                    .ends_with("cannot write: there is no folder no-such-folder"),
+                "{e}"
+            );
+        }
         assert_eq!(PathFormat::of(Path::new("p.GPX")).unwrap(), PathFormat::Gpx);
         assert_eq!(PathFormat::of(Path::new("-")).unwrap(), PathFormat::Csv);
         assert_eq!(

@@ -703,6 +703,26 @@ fn dash_is_standard_output_the_format_follows_the_extension_and_devices_stay_dev
     assert!(!err.contains("step 1"), "it fitted before refusing: {err}");
     let out = run(&["diagnose", "ride.csv", "--json", "d.txt"]);
     assert!(String::from_utf8_lossy(&out.stderr).contains(".json"));
+    // So does an output into a folder that is not there (a typo), for every
+    // command and output: the work would be lost at the end.
+    for args in [
+        &["fit", "ride.csv", "--out", "typo/p.csv"][..],
+        &["fit", "ride.csv", "--html", "typo/r.html"],
+        &["explain", "ride.csv", "--save-model", "typo/m.json"],
+        &["diagnose", "ride.csv", "--json", "typo/d.json"],
+    ] {
+        let out = run(args);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains("cannot write: there is no folder typo"),
+            "{args:?}: {err}"
+        );
+        assert!(
+            !err.contains("step 1") && !err.contains("base "),
+            "{args:?} worked first: {err}"
+        );
+    }
 
     // check --json /dev/stdout: the JSON arrives on standard output and
     // /dev/stdout is still a link.
