@@ -139,7 +139,20 @@ pub fn cumulative(t: &[f64], odo: &[Option<f64>]) -> (Vec<Option<f64>>, Jumps) {
         prev = Some((k, mended, since));
         out[k] = Some(mended);
     }
+    if !rare(jumps.rows.len(), ups + downs) {
+        return (odo.to_vec(), Jumps::default());
+    }
     (out, jumps)
+}
+
+/// Whether `n` readings beyond the bounds among `of` are glitches: a few
+/// (at most 2, or 1 % of them). More are no glitches but the column's units
+/// (an odometer in millimetres steps "190 m" every 0.01 s, a speed in km/h
+/// passes "100 m/s" on a highway): then nothing is mended, and the fit's
+/// and the check's units verdicts say what it is. Mended step by step, an
+/// odometer in millimetres became no distance at all.
+fn rare(n: usize, of: usize) -> bool {
+    n <= 2.max(of / 100)
 }
 
 /// `speed` (m/s, named `column`) with its samples faster than
@@ -153,11 +166,19 @@ pub fn speed(column: &'static str, speed: &[Option<f64>]) -> (Vec<Option<f64>>, 
         column,
         ..Jumps::default()
     };
+    // Too fast only where rare (see [`rare`]); a ground speed below 0 always.
+    let samples = speed.iter().flatten().count();
+    let too_fast = speed
+        .iter()
+        .flatten()
+        .filter(|v| v.abs() > V_MAX_MPS)
+        .count();
+    let fast_is_glitch = rare(too_fast, samples);
     let out = speed
         .iter()
         .enumerate()
         .map(|(k, v)| match *v {
-            Some(v) if v.abs() > V_MAX_MPS || (ground && v < 0.0) => {
+            Some(v) if (fast_is_glitch && v.abs() > V_MAX_MPS) || (ground && v < 0.0) => {
                 jumps.rows.push(k);
                 if v.abs() > jumps.largest.abs() {
                     jumps.largest = v;
@@ -263,6 +284,22 @@ mod tests {
         let (mended, jumps) = cumulative(&t, &odo);
         assert_eq!(jumps.rows, vec![60]);
         assert!(steps(&mended).iter().all(|s| (s + 30.0).abs() < 1e-9));
+    }
+
+    /// An odometer in millimetres, or a speed in km/h read as m/s, is no
+    /// run of glitches but the column's units: left as it is, for the
+    /// units verdicts to name.
+    #[test]
+    fn wrong_units_are_no_jumps() {
+        let (t, odo) = odometer(3000, 100.0, 12.0, 0.0);
+        let mm: Vec<Option<f64>> = odo.iter().map(|o| o.map(|x| x * 1000.0)).collect();
+        let (mended, jumps) = cumulative(&t, &mm);
+        assert!(jumps.is_empty(), "{jumps:?}");
+        assert_eq!(mended, mm);
+        let kmh: Vec<Option<f64>> = (0..500).map(|k| Some(90.0 + 0.05 * k as f64)).collect();
+        let (out, jumps) = speed("speed_mps", &kmh);
+        assert!(jumps.is_empty());
+        assert_eq!(out, kmh);
     }
 
     #[test]
