@@ -660,6 +660,32 @@ impl<'c> RowReader<'c> {
                 "empty on every row: the log has no gyro sample".into(),
             ));
         }
+        // The gyro's own rate, which the rows of other streams would hide.
+        let own: Vec<f64> = {
+            let mut empty = empty.iter().peekable();
+            (0..n)
+                .filter(|&j| {
+                    let filled = empty.peek() == Some(&&j);
+                    if filled {
+                        empty.next();
+                    }
+                    !filled
+                })
+                .map(|j| self.log.t_s[j])
+                .collect()
+        };
+        let rate = crate::signals::median_rate_hz(&own);
+        if own.len() < 2 || rate < crate::signals::MIN_GYRO_RATE_HZ {
+            return Err(self.field_err(
+                self.log.line[first],
+                column,
+                format!(
+                    "the gyro's own samples ({} of {n} rows; the others have none) come at {rate:.2} Hz: far too slow to integrate a vehicle's turns; a path needs a gyro at {} Hz or more",
+                    own.len(),
+                    crate::signals::MIN_GYRO_RATE_HZ
+                ),
+            ));
+        }
         let instantaneous = self
             .log
             .metadata
@@ -1028,6 +1054,19 @@ mod tests {
         assert_eq!(
             err(&partly),
             "bad.csv:5: column 'gy_dps': value is empty but the column needs one on every row"
+        );
+        // A gyro at 0.1 Hz among 10 Hz fixes is too slow, whatever the rows' rate.
+        let mut sparse = String::from("t_s,gx_dps,gy_dps,gz_dps,odo_m,lat_deg,lon_deg\n");
+        for k in 0..300 {
+            let gyro = if k % 100 == 0 { "0.1,0.2,0.3" } else { ",," };
+            sparse.push_str(&format!("{:.1},{gyro},{k},47.5,19.0\n", k as f64 * 0.1));
+        }
+        assert!(
+            err(&sparse).contains(
+                "the gyro's own samples (3 of 300 rows; the others have none) come at 0.10 Hz"
+            ),
+            "{}",
+            err(&sparse)
         );
         let none = GOOD
             .replace("0.12250,-0.31500,0.28000", ",,")
