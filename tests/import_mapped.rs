@@ -316,6 +316,19 @@ fn without_an_accuracy_the_hdop_weighs_the_fixes() {
     );
 }
 
+/// The mapped phone example's gyro file with `location` as its GPS file.
+fn phone_with_location(location: &std::path::Path) -> Result<import::Imported, String> {
+    import::open(
+        &mapped("phone-gyro.csv"),
+        &ImportOptions {
+            map: Some(mapped("phone.toml")),
+            gps: Some(location.to_path_buf()),
+            ..ImportOptions::default()
+        },
+    )
+    .map_err(|e| e.to_string())
+}
+
 /// A phone app stopped in the middle of writing its location file (no line
 /// end after the last row, which is short): that row is left out with a
 /// warning naming its line, and the rest of the ride loads. Before, the
@@ -326,15 +339,7 @@ fn a_location_file_cut_short_loses_its_last_row_only() {
     let text = std::fs::read_to_string(mapped("phone-location.csv")).unwrap();
     let cut = dir.path().join("cut.csv");
     std::fs::write(&cut, &text[..text.len() - 15]).unwrap();
-    let opened = import::open(
-        &mapped("phone-gyro.csv"),
-        &ImportOptions {
-            map: Some(mapped("phone.toml")),
-            gps: Some(cut.clone()),
-            ..ImportOptions::default()
-        },
-    )
-    .unwrap();
+    let opened = phone_with_location(&cut).unwrap();
     assert_eq!(opened.log.fix_count(), 180);
     let lines = text.lines().count();
     assert!(
@@ -349,15 +354,7 @@ fn a_location_file_cut_short_loses_its_last_row_only() {
     );
     // With its line end, the short row is bad input, as any other.
     std::fs::write(&cut, format!("{}\n", &text[..text.len() - 15])).unwrap();
-    let refused = import::open(
-        &mapped("phone-gyro.csv"),
-        &ImportOptions {
-            map: Some(mapped("phone.toml")),
-            gps: Some(cut),
-            ..ImportOptions::default()
-        },
-    );
-    assert!(refused.is_err());
+    assert!(phone_with_location(&cut).is_err());
 }
 
 /// A phone that has no speed for ten seconds writes -1 there (iOS does):
@@ -382,15 +379,7 @@ fn a_phones_minus_one_speed_is_no_speed() {
     }
     let location = dir.path().join("location.csv");
     std::fs::write(&location, edited).unwrap();
-    let opened = import::open(
-        &mapped("phone-gyro.csv"),
-        &ImportOptions {
-            map: Some(mapped("phone.toml")),
-            gps: Some(location),
-            ..ImportOptions::default()
-        },
-    )
-    .unwrap();
+    let opened = phone_with_location(&location).unwrap();
     assert!(
         opened
             .log
