@@ -184,15 +184,37 @@ fn not_a_bag_is_told_apart() {
     assert!(e.contains("fuzz.mcap") && e.contains("MCAP"), "{e}");
 }
 
+/// A recording cut short (a recorder killed, a disk full, a copy cut
+/// short) keeps the records before the cut, and says where it ends; it was
+/// refused whole before. Cut before anything usable, it is an error naming
+/// the file.
 #[test]
-fn the_real_bag_cut_short_is_an_error_naming_the_file() {
+fn the_real_bag_cut_short_keeps_what_came_before_the_cut() {
     let bytes = std::fs::read(HUSKY_BAG).unwrap();
-    for cut in [20, 5000, bytes.len() / 3, bytes.len() - 7] {
-        let e = read_ros1(&bytes[..cut]).unwrap_err();
+    let whole = read_ros1(&bytes).unwrap();
+    let mut rows = Vec::new();
+    for cut in [bytes.len() / 3, bytes.len() * 7 / 10, bytes.len() - 7] {
+        let choice = TopicChoice::default();
+        let (rec, topics) = ros1::read_from(&bytes[..cut], "fuzz.bag", &choice).unwrap();
+        assert!(rec.cut_at.is_some_and(|at| at < cut as u64), "cut {cut}");
+        let log = gyropath::import::timeline::assemble(rec, &topics).unwrap();
         assert!(
-            e.contains("fuzz.bag") && (e.contains("truncated") || e.contains("corrupt")),
-            "cut {cut}: {e}"
+            log.warnings
+                .iter()
+                .any(|w| w
+                    .starts_with("fuzz.bag: the recording ends in the middle of a record at byte")),
+            "cut {cut}: {:?}",
+            log.warnings
         );
+        rows.push(log.len());
+    }
+    assert!(
+        rows[0] < rows[1] && rows[1] <= rows[2] && rows[2] <= whole,
+        "{rows:?} of {whole}"
+    );
+    for cut in [20, 5000] {
+        let e = read_ros1(&bytes[..cut]).unwrap_err();
+        assert!(e.contains("fuzz.bag"), "cut {cut}: {e}");
     }
 }
 

@@ -59,7 +59,15 @@ pub fn read_from(
     let mut header = Vec::new();
     let mut data = Vec::new();
     let mut chunk = Vec::new();
-    while bag.next_record(&mut input, &mut header, &mut data)? {
+    loop {
+        match bag.next_record(&mut input, &mut header, &mut data)? {
+            Next::Record => {}
+            Next::End => break,
+            Next::Cut => {
+                bag.recording.cut_at = Some(bag.offset);
+                break;
+            }
+        }
         let fields = Fields::parse(&header).map_err(|m| bag.corrupt(&m))?;
         match fields.op().map_err(|m| bag.corrupt(&m))? {
             OP_CHUNK => {
@@ -75,6 +83,13 @@ pub fn read_from(
     }
     let topics = bag.recording.choose(choice)?;
     Ok((bag.recording, topics))
+}
+
+/// What [`Bag::next_record`] found.
+enum Next {
+    Record,
+    End,
+    Cut,
 }
 
 /// A connection: its topic and message type.
@@ -99,18 +114,21 @@ impl Bag<'_> {
         }
     }
 
-    /// Read one record's header and data; `false` at a clean end of the file.
+    /// Read one record's header and data: [`Next::End`] at a clean end of
+    /// the file, [`Next::Cut`] where it ends inside the record (a recorder
+    /// killed, a disk full, a copy cut short: the records before it stand,
+    /// as the bag's own `rosbag reindex` would keep them).
     fn next_record(
         &mut self,
         input: &mut impl Read,
         header: &mut Vec<u8>,
         data: &mut Vec<u8>,
-    ) -> Result<bool, LoadError> {
+    ) -> Result<Next, LoadError> {
         let mut len = [0u8; 4];
         match read_full(input, &mut len) {
-            Ok(0) => return Ok(false),
+            Ok(0) => return Ok(Next::End),
             Ok(4) => {}
-            Ok(_) => return Err(self.truncated()),
+            Ok(_) => return Ok(Next::Cut),
             Err(error) => {
                 return Err(LoadError::Io {
                     file: self.file.to_string(),
@@ -118,26 +136,29 @@ impl Bag<'_> {
                 });
             }
         }
-        self.read_block(input, u32::from_le_bytes(len) as usize, header)?;
+        if !self.read_block(input, u32::from_le_bytes(len) as usize, header)? {
+            return Ok(Next::Cut);
+        }
         let mut len = [0u8; 4];
         if read_full(input, &mut len).map_err(|error| LoadError::Io {
             file: self.file.to_string(),
             error,
         })? != 4
+            || !self.read_block(input, u32::from_le_bytes(len) as usize, data)?
         {
-            return Err(self.truncated());
+            return Ok(Next::Cut);
         }
-        self.read_block(input, u32::from_le_bytes(len) as usize, data)?;
         self.offset += 8 + header.len() as u64 + data.len() as u64;
-        Ok(true)
+        Ok(Next::Record)
     }
 
+    /// Read `n` bytes into `out`; `false` where the file ends before them.
     fn read_block(
         &self,
         input: &mut impl Read,
         n: usize,
         out: &mut Vec<u8>,
-    ) -> Result<(), LoadError> {
+    ) -> Result<bool, LoadError> {
         if n > MAX_RECORD {
             return Err(self.corrupt(&format!("a length of {n} bytes")));
         }
@@ -150,20 +171,7 @@ impl Bag<'_> {
                 file: self.file.to_string(),
                 error,
             })?;
-        if got != n {
-            return Err(self.truncated());
-        }
-        Ok(())
-    }
-
-    fn truncated(&self) -> LoadError {
-        LoadError::File {
-            file: self.file.to_string(),
-            message: format!(
-                "the bag is truncated: its record at byte {} ends early",
-                self.offset
-            ),
-        }
+        Ok(got == n)
     }
 
     /// The records inside a decompressed chunk: connections and messages.

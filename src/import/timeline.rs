@@ -124,6 +124,9 @@ pub struct Recording {
     fix: BTreeMap<String, Vec<FixMsg>>,
     /// Messages whose header stamp was zero (the recording time is used instead).
     unstamped: usize,
+    /// Where a recording cut short ends (a byte offset): what came before
+    /// it was read, the unfinished record after it left out.
+    pub cut_at: Option<u64>,
 }
 
 impl Recording {
@@ -528,6 +531,12 @@ pub fn assemble(mut rec: Recording, topics: &Topics) -> Result<RideLog, LoadErro
         names: [topics.imu.clone(), topics.odom.clone(), topics.fix.clone()],
         warnings: Vec::new(),
     };
+    if let Some(at) = rec.cut_at {
+        streams.warnings.push(format!(
+            "{}: the recording ends in the middle of a record at byte {at} (a recorder stopped abruptly, or a copy cut short): the records before it are read, the unfinished one left out",
+            rec.source
+        ));
+    }
     if rec.unstamped > 0 {
         streams.warnings.push(format!(
             "{}: {} message(s) have no header stamp (zero); the time they were recorded at is used",
