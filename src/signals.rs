@@ -462,7 +462,9 @@ impl Signals {
         let attitude = choose_attitude(log, &t, &gyro).map_err(&unusable)?;
         // The distance's standing rule and a gap's stands read the rates
         // as logged, before a planar ride's roll and pitch are set aside.
-        let (distance, odometer) = odometer_distance(log, |j| gyro[j].map(f64::to_degrees).into())?;
+        let (distance, jumps) =
+            odometer_distance_and_jumps(log, |j| gyro[j].map(f64::to_degrees).into());
+        let (distance, odometer) = distance?;
         if attitude.is_planar() {
             for w in &mut gyro {
                 w.x = 0.0;
@@ -494,7 +496,7 @@ impl Signals {
         let t0_unix_s = time("t0_unix_s", "a time in seconds since 1970")?;
         let t0_boot_s = time("t0_boot_s", "a time in seconds on the device's boot clock")?;
 
-        if let Some(w) = distance_jumps(log).describe(&file, &log.line, &t) {
+        if let Some(w) = jumps.describe(&file, &log.line, &t) {
             warnings.push(w);
         }
         let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
@@ -716,55 +718,63 @@ pub fn odometer_distance(
     log: &RideLog,
     rate_dps: impl Fn(usize) -> [f64; 3],
 ) -> Result<(Vec<f64>, Odometer), SignalError> {
+    odometer_distance_and_jumps(log, rate_dps).0
+}
+
+/// [`odometer_distance`], and the readings of the column it takes the
+/// distance from that are no distance, as it mends them (see
+/// [`crate::odometer_jumps`]; said whether or not a distance comes of it).
+pub fn odometer_distance_and_jumps(
+    log: &RideLog,
+    rate_dps: impl Fn(usize) -> [f64; 3],
+) -> (
+    Result<(Vec<f64>, Odometer), SignalError>,
+    crate::odometer_jumps::Jumps,
+) {
+    use crate::odometer_jumps::{Jumps, cumulative, speed};
     if let Some(odo) = &log.odo_m {
         let kind = match log.metadata.get("odometer") {
             Some(from) => Odometer::Merged { from: from.clone() },
             None => Odometer::Cumulative,
         };
-        let (odo, _) = crate::odometer_jumps::cumulative(&log.t_s, odo);
-        Ok((distance_from_odometer(&odo, log)?, kind))
-    } else if let Some(speed) = &log.speed_mps {
-        let (speed, _) = crate::odometer_jumps::speed("speed_mps", speed);
-        Ok((distance_from_speed(&speed, log)?, Odometer::Speed))
+        let (odo, jumps) = cumulative(&log.t_s, odo);
+        (distance_from_odometer(&odo, log).map(|d| (d, kind)), jumps)
+    } else if let Some(v) = &log.speed_mps {
+        let (v, jumps) = speed("speed_mps", v);
+        (
+            distance_from_speed(&v, log).map(|d| (d, Odometer::Speed)),
+            jumps,
+        )
     } else if let Some(pulses) = &log.wheel_pulse {
-        let c: f64 = log
+        let distance = log
             .wheel_circumference_m()
-            .and_then(|s| s.parse().ok())
+            .and_then(|s| s.parse::<f64>().ok())
             .ok_or_else(|| SignalError::Unusable {
                 file: log.source.clone(),
                 message: "wheel_circumference_m is missing".into(),
-            })?;
-        let (d, revolutions) = distance_from_pulses(&log.t_s, pulses, c);
-        Ok((
-            d,
-            Odometer::WheelPulses {
-                circumference_m: c,
-                revolutions,
-            },
-        ))
-    } else if let Some(speed) = &log.gps_speed_mps {
-        let (speed, _) = crate::odometer_jumps::speed("gps_speed_mps", speed);
-        distance_from_gnss_speed(&speed, log, rate_dps)
+            })
+            .map(|c| {
+                let (d, revolutions) = distance_from_pulses(&log.t_s, pulses, c);
+                (
+                    d,
+                    Odometer::WheelPulses {
+                        circumference_m: c,
+                        revolutions,
+                    },
+                )
+            });
+        (distance, Jumps::default())
+    } else if let Some(v) = &log.gps_speed_mps {
+        let (v, jumps) = speed("gps_speed_mps", v);
+        (distance_from_gnss_speed(&v, log, rate_dps), jumps)
     } else {
-        Err(SignalError::Unusable {
-            file: log.source.clone(),
-            message: "the log has no distance column".into(),
-        })
-    }
-}
-
-/// The readings of the column [`odometer_distance`] takes the distance from
-/// that are no distance (see [`crate::odometer_jumps`]), as it mends them.
-pub fn distance_jumps(log: &RideLog) -> crate::odometer_jumps::Jumps {
-    use crate::odometer_jumps::{cumulative, speed};
-    if let Some(odo) = &log.odo_m {
-        cumulative(&log.t_s, odo).1
-    } else if let Some(v) = &log.speed_mps {
-        speed("speed_mps", v).1
-    } else if let (None, Some(v)) = (&log.wheel_pulse, &log.gps_speed_mps) {
-        speed("gps_speed_mps", v).1
-    } else {
-        crate::odometer_jumps::Jumps::default()
+        (
+            Err(SignalError::Unusable {
+                file: log.source.clone(),
+                message: "the log has no distance column".into(),
+            }),
+            Jumps::default(),
+        )
     }
 }
 
@@ -1327,7 +1337,8 @@ mod attitude_tests {
                 d[j]
             );
         }
-        let said = distance_jumps(&log)
+        let said = odometer_distance_and_jumps(&log, |j| log.gyro_dps[j])
+            .1
             .describe("r.csv", &log.line, &log.t_s)
             .expect("said");
         assert!(

@@ -398,8 +398,6 @@ struct RowReader<'c> {
     extra_values: Vec<Vec<Option<f64>>>,
     prev_t: f64,
     repeats: Repeats,
-    /// Rows with all three gyro fields empty (see [`RowReader::fill_gyro`]).
-    no_gyro: Vec<usize>,
 }
 
 /// Rows that repeat the row before them exactly, field by field: a logger
@@ -449,7 +447,6 @@ impl<'c> RowReader<'c> {
             extra_values: vec![Vec::new(); columns.extra.len()],
             prev_t: f64::NEG_INFINITY,
             repeats: Repeats::default(),
-            no_gyro: Vec::new(),
         }
     }
 
@@ -584,9 +581,6 @@ impl<'c> RowReader<'c> {
         }
         log.line.push(line);
         log.t_s.push(t);
-        if g[0].is_nan() {
-            self.no_gyro.push(log.gyro_dps.len());
-        }
         log.gyro_dps.push(g);
         log.fix.push(fix);
         self.prev_t = t;
@@ -647,13 +641,18 @@ impl<'c> RowReader<'c> {
     /// over the same time); instantaneous samples are interpolated linearly
     /// in time. Either way the rotation integrated is the gyro's own.
     fn fill_gyro(&mut self) -> Result<(), LoadError> {
-        let empty = std::mem::take(&mut self.no_gyro);
-        let Some(&first) = empty.first() else {
+        // A row without a sample holds NaN (parsed values are finite).
+        let n = self.log.gyro_dps.len();
+        let has: Vec<bool> = self.log.gyro_dps.iter().map(|g| !g[0].is_nan()).collect();
+        let Some(first) = has.iter().position(|&h| !h) else {
             return Ok(());
         };
-        let n = self.log.gyro_dps.len();
         let column = &self.columns.names[self.columns.gyro[0]];
-        if empty.len() == n {
+        let own: Vec<f64> = (0..n)
+            .filter(|&j| has[j])
+            .map(|j| self.log.t_s[j])
+            .collect();
+        if own.is_empty() {
             return Err(self.field_err(
                 self.log.line[first],
                 column,
@@ -661,19 +660,6 @@ impl<'c> RowReader<'c> {
             ));
         }
         // The gyro's own rate, which the rows of other streams would hide.
-        let own: Vec<f64> = {
-            let mut empty = empty.iter().peekable();
-            (0..n)
-                .filter(|&j| {
-                    let filled = empty.peek() == Some(&&j);
-                    if filled {
-                        empty.next();
-                    }
-                    !filled
-                })
-                .map(|j| self.log.t_s[j])
-                .collect()
-        };
         let rate = crate::signals::median_rate_hz(&own);
         if own.len() < 2 || rate < crate::signals::MIN_GYRO_RATE_HZ {
             return Err(self.field_err(
@@ -692,38 +678,43 @@ impl<'c> RowReader<'c> {
             .get("gyro_samples")
             .is_some_and(|v| v.trim() == "instantaneous");
         let (t, g) = (&self.log.t_s, &mut self.log.gyro_dps);
-        let mut longest = 0.0f64;
-        let mut k = 0;
-        while k < empty.len() {
-            // The run of empty rows a..=b, and the samples either side.
-            let a = empty[k];
-            let mut b = a;
-            while k + 1 < empty.len() && empty[k + 1] == b + 1 {
-                k += 1;
-                b += 1;
-            }
-            k += 1;
-            let before = a.checked_sub(1);
-            let after = (b + 1 < n).then_some(b + 1);
-            longest = longest.max(t[after.unwrap_or(b)] - t[before.unwrap_or(a)]);
-            for j in a..=b {
-                g[j] = match (before, after) {
-                    (Some(p), Some(q)) if instantaneous => {
-                        let w = (t[j] - t[p]) / (t[q] - t[p]);
-                        [0, 1, 2].map(|i| g[p][i] + w * (g[q][i] - g[p][i]))
-                    }
-                    (_, Some(q)) => g[q],
-                    (Some(p), None) => g[p],
-                    (None, None) => unreachable!("a log with a gyro sample has one either side"),
-                };
+        // The sample after each row without one (a backward pass), then the
+        // sample before it (forwards).
+        let mut next = vec![None; n];
+        let mut after = None;
+        for j in (0..n).rev() {
+            if has[j] {
+                after = Some(j);
+            } else {
+                next[j] = after;
             }
         }
+        let mut before = None;
+        let mut longest = 0.0f64;
+        for j in 0..n {
+            if has[j] {
+                before = Some(j);
+                continue;
+            }
+            let after = next[j];
+            longest = longest.max(t[after.unwrap_or(j)] - t[before.unwrap_or(j)]);
+            g[j] = match (before, after) {
+                (Some(p), Some(q)) if instantaneous => {
+                    let w = (t[j] - t[p]) / (t[q] - t[p]);
+                    [0, 1, 2].map(|i| g[p][i] + w * (g[q][i] - g[p][i]))
+                }
+                (_, Some(q)) => g[q],
+                (Some(p), None) => g[p],
+                (None, None) => unreachable!("a log with a gyro sample has one either side"),
+            };
+        }
+        let filled = n - own.len();
         self.log.warnings.push(format!(
             "{}:{}: {} row{} no gyro sample (the rows of another stream merged in by time, such as the fixes): each takes the rate of the sample that covers its time ({}), the longest stretch {longest:.3} s",
             self.file,
             self.log.line[first],
-            empty.len(),
-            if empty.len() == 1 { " has" } else { "s have" },
+            filled,
+            if filled == 1 { " has" } else { "s have" },
             if instantaneous { "interpolated" } else { "the next sample's mean rate" },
         ));
         Ok(())

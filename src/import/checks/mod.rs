@@ -202,15 +202,16 @@ pub fn check(log: &RideLog) -> CheckReport {
         return report;
     }
     saturation(log, &mut report);
-    if let Some(w) = crate::signals::distance_jumps(log).describe(&log.source, &log.line, &log.t_s)
-    {
+    let (distance, jumps) = crate::signals::odometer_distance_and_jumps(log, |j| log.gyro_dps[j]);
+    if let Some(w) = jumps.describe(&log.source, &log.line, &log.t_s) {
         report.say("odometer jumps", Level::Warning, w);
     }
+    let distance = distance.map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
     let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
     }
-    let fixes = summarise(log, &blunders);
+    let fixes = summarise(log, &blunders, &distance);
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.

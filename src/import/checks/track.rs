@@ -21,15 +21,14 @@ pub(super) struct AtFix {
     pub(super) acc: Option<[f64; 3]>,
 }
 
-/// The fixes of `log` but its `blunders`, with what happened between them.
-pub(super) fn summarise(log: &RideLog, blunders: &Blunders) -> Vec<AtFix> {
+/// The fixes of `log` but its `blunders`, with what happened between them
+/// (`dist`: the odometer's distance per step, zero where it has none).
+pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec<AtFix> {
     let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
     let Some(first) = (0..log.len()).find_map(usable) else {
         return Vec::new();
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
-    let dist = crate::signals::odometer_distance(log, |j| log.gyro_dps[j])
-        .map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
     let mut s = 0.0;
     let mut turn = [0.0; 3];
     let mut acc_sum = [0.0; 3];
