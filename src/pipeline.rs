@@ -175,6 +175,7 @@ pub fn report_with(
         None => FitReport::new(fit, elapsed_s),
     };
     if let Some((track, matched)) = reference {
+        report.warnings.extend(track.warnings.iter().cloned());
         report.reference = Some(reference::compare(
             fit.model(),
             fit.params(),

@@ -596,6 +596,30 @@ fn a_reference_track_is_drawn_and_the_history_says_how_far_each_model_is_from_it
         .as_ref()
         .is_some_and(|e| e.contains("not of this ride"))));
     assert!(h.state().ride.is_some());
+
+    // The ride's own reference cut short (its recorder stopped while
+    // writing a row): loaded over what it holds, and the status says so.
+    let dir = tempfile::tempdir().unwrap();
+    let cut = dir.path().join("cut-truth.csv");
+    let truth = std::fs::read(drive.join("truth.csv")).unwrap();
+    let at = truth.len() * 2 / 3;
+    let at = at + truth[at..].iter().position(|&b| b == b',').unwrap() + 1;
+    std::fs::write(&cut, &truth[..at]).unwrap();
+    h.state_mut()
+        .apply(gyropath::app::Command::OpenReference(cut));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .reference
+        .as_ref()
+        .is_some_and(|r| r.name.contains("cut-truth"))));
+    let app = h.state();
+    let r = app.reference.as_ref().unwrap();
+    assert!(r.covered_s > 30.0 && r.covered_s < 50.0, "{}", r.covered_s);
+    assert!(r.warnings.len() == 1 && r.warnings[0].contains("left out"));
+    let status = app.status.as_deref().unwrap_or("");
+    assert!(
+        status.contains("warning:") && status.contains("left out"),
+        "{status}"
+    );
 }
 
 #[test]

@@ -1464,3 +1464,44 @@ fn between_fits_a_part_of_the_ride_and_refuses_an_empty_or_malformed_window() {
         );
     }
 }
+
+/// A reference whose recorder stopped while writing (its last line cut
+/// short) measures the fit over what it holds, with a warning naming the
+/// line in the terminal and the report, instead of refusing the reference
+/// and with it the fit (the comma drive's own truth, cut inside a row).
+#[test]
+fn a_reference_cut_short_measures_the_fit_over_what_it_holds() {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/real/comma2k19-example1");
+    let dir = tempfile::tempdir().unwrap();
+    let truth = std::fs::read(real.join("truth.csv")).unwrap();
+    let cut = dir.path().join("truth.csv");
+    std::fs::write(&cut, &truth[..200_020]).unwrap();
+    let report = dir.path().join("r.json");
+    let out = gyropath(&[
+        "fit",
+        s(&real.join("ride.csv")),
+        "--reference",
+        s(&cut),
+        "--json",
+        s(&report),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("warning:") && err.contains("truth.csv:4463") && err.contains("left out"),
+        "{err}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let covered = r["reference"]["covered_s"].as_f64().unwrap();
+    assert!((40.0..45.0).contains(&covered), "{covered}");
+    let rms = r["reference"]["horizontal"]["rms_m"].as_f64().unwrap();
+    assert!(rms > 0.5 && rms < 2.0, "{rms}");
+    let warned = r["warnings"].as_array().unwrap();
+    assert!(
+        warned
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("truth.csv:4463")),
+        "{warned:?}"
+    );
+}

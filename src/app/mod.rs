@@ -303,8 +303,13 @@ impl GyropathApp {
                 Update::DiagnosisProgress(p) => self.diagnosing = Some(p),
                 Update::ReferenceLoaded(r) => {
                     self.status = Some(format!(
-                        "reference {}: covers {:.0} s of the ride",
-                        r.name, r.covered_s
+                        "reference {}: covers {:.0} s of the ride{}",
+                        r.name,
+                        r.covered_s,
+                        r.warnings
+                            .iter()
+                            .map(|w| format!("; warning: {w}"))
+                            .collect::<String>()
                     ));
                     self.reference = Some(*r);
                     // The worker follows with a snapshot of the current fit

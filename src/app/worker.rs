@@ -123,6 +123,8 @@ pub struct ReferenceView {
     pub points: Vec<[f64; 3]>,
     /// Seconds of the ride it covers, of its duration.
     pub covered_s: f64,
+    /// What reading it left out (a last line cut short).
+    pub warnings: Vec<String>,
 }
 
 /// A freshly loaded ride: the measurements to draw under the fit.
@@ -512,6 +514,7 @@ impl Worker {
             name: track.source.clone(),
             points,
             covered_s: matched.covered_s(sig),
+            warnings: track.warnings.clone(),
         };
         ride.reference = Some(Arc::new((track, matched)));
         self.send(Update::ReferenceLoaded(Box::new(view)));

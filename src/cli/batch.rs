@@ -168,7 +168,7 @@ fn fit_one(
 ) -> Result<FitReport> {
     let started = Instant::now();
     let (signals, origin) = load_ride(ride, source, true)?;
-    let against = matched_reference(reference_for(ride, reference).as_deref(), &signals)?;
+    let against = matched_reference(reference_for(ride, reference).as_deref(), &signals, true)?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
     physical(&fit)?;

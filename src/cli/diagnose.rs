@@ -58,7 +58,7 @@ pub fn diagnose(args: &DiagnoseArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let against = matched_reference(args.reference.as_deref(), &signals)?;
+    let against = matched_reference(args.reference.as_deref(), &signals, args.quiet)?;
     let folds = Folds {
         block_s: args.block_s,
         k: args.folds,

@@ -97,7 +97,7 @@ pub fn explain(args: &ExplainArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let against = matched_reference(args.reference.as_deref(), &signals)?;
+    let against = matched_reference(args.reference.as_deref(), &signals, args.quiet)?;
     let terminal = std::io::stderr().is_terminal() && !args.quiet;
     let bar = terminal.then(|| {
         let bar = indicatif::ProgressBar::new_spinner();

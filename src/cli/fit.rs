@@ -128,7 +128,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    let against = matched_reference(args.reference.as_deref(), &signals)?;
+    let against = matched_reference(args.reference.as_deref(), &signals, args.quiet)?;
     let mut fit = Reconstruction::new(signals, settings)?;
     let terminal = std::io::stderr().is_terminal() && !args.quiet;
     let bar = terminal.then(|| {

@@ -448,14 +448,22 @@ fn physical(fit: &Reconstruction) -> Result<()> {
 
 /// Match a reference track (read before the ride, so that a bad file fails
 /// before a long load) to the ride's rows: one of another drive fails here,
-/// before the fit.
+/// before the fit. What its reading left out is said unless `quiet` (the
+/// reports carry it too).
 fn matched_reference(
     reference: Option<&Path>,
     signals: &Signals,
+    quiet: bool,
 ) -> Result<Option<pipeline::MatchedReference>> {
-    Ok(reference
+    let matched = reference
         .map(|p| pipeline::reference_for(p, signals))
-        .transpose()?)
+        .transpose()?;
+    if !quiet {
+        for w in matched.iter().flat_map(|(track, _)| &track.warnings) {
+            eprintln!("warning: {w}");
+        }
+    }
+    Ok(matched)
 }
 
 /// Write the fitted path to `out` in `format`.

@@ -406,13 +406,7 @@ mod tests {
         every: usize,
     ) -> ReferenceTrack {
         let sig = &model.signals;
-        let mut r = ReferenceTrack {
-            source: "ref.csv".into(),
-            t_s: Vec::new(),
-            points: Vec::new(),
-            has_alt: false,
-            clock: crate::import::reference::Clock::Ride,
-        };
+        let mut r = ReferenceTrack::empty("ref.csv", crate::import::reference::Clock::Ride);
         model.for_each_pose(theta, |j, _, p| {
             if j % every == 0 {
                 let g = sig

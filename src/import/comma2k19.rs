@@ -281,5 +281,6 @@ pub fn read_reference(path: &Path) -> Result<ReferenceTrack, LoadError> {
         points,
         has_alt: true,
         clock: Clock::Boot,
+        warnings: Vec::new(),
     })
 }

@@ -84,6 +84,39 @@ fn field<'r>(r: &'r FitDataRecord, name: &str) -> Option<&'r Value> {
         .map(|f| f.value())
 }
 
+/// The data records of a FIT file, read one by one; and where the file is
+/// shorter than its header declares (a device that stopped while writing:
+/// the CRC and the records after the cut are missing), the declared size,
+/// with the records before the cut. A fault inside a whole file is an
+/// error, as `fitparser::from_bytes` makes it.
+fn records_of(bytes: &[u8]) -> fitparser::Result<(Vec<FitDataRecord>, Option<usize>)> {
+    // Header: its own size (byte 0), the data's (bytes 4-7), then the
+    // data and a two-byte CRC.
+    let declared = bytes
+        .get(4..8)
+        .map(|d| bytes[0] as usize + u32::from_le_bytes([d[0], d[1], d[2], d[3]]) as usize + 2);
+    let cut = declared.filter(|&n| bytes.len() < n);
+    let mut processor = fitparser::de::FitStreamProcessor::new();
+    let mut records = Vec::new();
+    let mut rest = bytes;
+    while !rest.is_empty() {
+        let (next, object) = match processor.deserialize_next(rest) {
+            Ok(v) => v,
+            Err(_) if cut.is_some() && !records.is_empty() => break,
+            Err(e) => return Err(e),
+        };
+        match object {
+            fitparser::de::FitObject::Crc(..) => processor.reset(),
+            fitparser::de::FitObject::DataMessage(message) => {
+                records.push(processor.decode_message(message)?);
+            }
+            _ => {}
+        }
+        rest = next;
+    }
+    Ok((records, cut))
+}
+
 /// Parse the bytes of a FIT file named `file` (for messages).
 pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
     let whole = |message: String| LoadError::File {
@@ -91,7 +124,7 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
         message,
     };
     // A third-party parser of a binary format: its panic is this file's error.
-    let records = match std::panic::catch_unwind(|| fitparser::from_bytes(bytes)) {
+    let (records, cut) = match std::panic::catch_unwind(|| records_of(bytes)) {
         Ok(Ok(r)) => r,
         Ok(Err(e)) => return Err(whole(format!("not a readable FIT file: {e}"))),
         Err(_) => {
@@ -101,6 +134,13 @@ pub fn parse(bytes: &[u8], file: &str) -> Result<Activity, LoadError> {
         }
     };
     let mut track = ReferenceTrack::empty(file, Clock::Unix);
+    if let Some(declared) = cut {
+        track.warnings.push(format!(
+            "{file}: the file is cut short ({} of the {declared} bytes its header declares, as when a device stops while writing): the {} records before the cut are read",
+            bytes.len(),
+            records.len()
+        ));
+    }
     let mut distance_m = None;
     let mut odometer: Vec<(f64, f64)> = Vec::new();
     let mut wheel_sensor = false;
@@ -237,6 +277,7 @@ fn merge_activity(log: &mut RideLog, activity: &Activity, file: &str) -> Result<
             (end - start).max(0.0)
         )));
     }
+    log.warnings.extend(activity.track.warnings.iter().cloned());
     let rows = log.t_s.partition_point(|&t| t < start)..log.t_s.partition_point(|&t| t <= end);
     if rows.len() < log.len() {
         log.warnings.push(format!(
@@ -385,5 +426,35 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("no t0_unix_s"), "{e}");
+    }
+
+    /// A FIT file cut short (a device that stopped while writing: no CRC,
+    /// the last record cut) keeps its records before the cut, with a
+    /// warning; refused whole, it took the reference and the fit with it.
+    #[test]
+    fn a_fit_file_cut_short_keeps_the_records_before_the_cut() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/formats/fit/Edge810-Vector-2013-08-16-15-35-10.fit");
+        let bytes = std::fs::read(path).unwrap();
+        let whole = parse(&bytes, "a.fit").unwrap();
+        assert!(whole.track.warnings.is_empty());
+        let cut = parse(&bytes[..bytes.len() * 3 / 5 + 7], "a.fit").unwrap();
+        let n = cut.track.t_s.len();
+        assert!(n > 1000 && n < whole.track.t_s.len(), "{n}");
+        assert_eq!(cut.track.t_s[..], whole.track.t_s[..n]);
+        assert_eq!(cut.odometer[..], whole.odometer[..cut.odometer.len()]);
+        assert_eq!(cut.track.warnings.len(), 1);
+        assert!(
+            cut.track.warnings[0].contains("cut short"),
+            "{:?}",
+            cut.track.warnings
+        );
+        // Whole but damaged inside, or cut before any record: still an error.
+        let mut damaged = bytes.clone();
+        damaged[5000] ^= 0xff;
+        damaged[5001] ^= 0xff;
+        let e = parse(&damaged, "a.fit").unwrap_err().to_string();
+        assert!(e.contains("not a readable FIT file"), "{e}");
+        assert!(parse(&bytes[..20], "a.fit").is_err());
     }
 }

@@ -32,6 +32,9 @@ pub struct ReferenceTrack {
     pub has_alt: bool,
     /// What `t_s` counts from.
     pub clock: Clock,
+    /// What was left out in reading it (a last line cut short), said
+    /// wherever the track is used.
+    pub warnings: Vec<String>,
 }
 
 /// The clock of a reference track's times.
@@ -59,6 +62,7 @@ impl ReferenceTrack {
             points: Vec::new(),
             has_alt: false,
             clock,
+            warnings: Vec::new(),
         }
     }
 
@@ -153,8 +157,21 @@ pub fn parse_gpx(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError> 
         file: file.to_string(),
         message,
     };
-    let doc = gpx::read(bytes).map_err(|e| whole(format!("not a GPX file: {e}")))?;
     let mut track = ReferenceTrack::empty(file, Clock::Unix);
+    let doc = match gpx::read(bytes) {
+        Ok(doc) => doc,
+        Err(e) => {
+            let Some(closed) = closed_at_last_point(bytes) else {
+                return Err(whole(format!("not a GPX file: {e}")));
+            };
+            let doc =
+                gpx::read(closed.as_slice()).map_err(|_| whole(format!("not a GPX file: {e}")))?;
+            track.warnings.push(format!(
+                "{file}: the file ends inside its track (no closing </gpx>, as when a logger stops while writing): the track points before the cut are read, what follows the last whole point is left out"
+            ));
+            doc
+        }
+    };
     let points = doc
         .tracks
         .iter()
@@ -193,6 +210,21 @@ pub fn parse_gpx(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError> 
     Ok(track)
 }
 
+/// A GPX file cut short (no `</gpx>`: a logger that stopped while writing)
+/// closed after its last whole track point, as the logger would have
+/// closed it there; `None` for a file that has its end (its fault is
+/// another) or no whole point.
+fn closed_at_last_point(bytes: &[u8]) -> Option<Vec<u8>> {
+    let find_last = |needle: &[u8]| bytes.windows(needle.len()).rposition(|w| w == needle);
+    if find_last(b"</gpx>").is_some() {
+        return None;
+    }
+    let end = find_last(b"</trkpt>")? + b"</trkpt>".len();
+    let mut closed = bytes[..end].to_vec();
+    closed.extend_from_slice(b"</trkseg></trk></gpx>");
+    Some(closed)
+}
+
 /// Parse NMEA 0183 as a reference track: one point per GGA sentence with a
 /// fix (quality not 0), its UTC time of day dated by the RMC sentences (the
 /// last before it, or the first in the file; without one, by the ride's
@@ -218,12 +250,26 @@ pub fn parse_nmea(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError>
     // counted for the error when nothing is left.
     let mut sentences = Vec::new();
     let mut garbled = 0usize;
+    // A file that ends inside a sentence (a logger that stopped while
+    // writing) ends in a line without its end and without its checksum:
+    // that sentence is left out, and said, whatever it holds, since its
+    // last field may be cut short (a height of 33.6 for 33.694).
+    let ends_cut = !text.is_empty() && !text.ends_with(['\n', '\r']);
+    let count = text.lines().count();
+    let mut warnings = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = raw.trim();
         let Some(body) = line.strip_prefix('$') else {
             continue;
         };
         let body = match body.split_once('*') {
+            None if ends_cut && i + 1 == count => {
+                warnings.push(format!(
+                    "{file}:{}: the last line is left out: it ends without its checksum or line end, as when a logger stops in the middle of writing a sentence",
+                    i + 1
+                ));
+                continue;
+            }
             Some((body, sum)) => {
                 let sound = u8::from_str_radix(sum.trim(), 16)
                     .is_ok_and(|want| body.bytes().fold(0u8, |a, b| a ^ b) == want);
@@ -253,11 +299,8 @@ pub fn parse_nmea(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadError>
         Clock::TimeOfDay
     };
     let mut track = ReferenceTrack {
-        source: file.to_string(),
-        t_s: Vec::new(),
-        points: Vec::new(),
-        has_alt: false,
-        clock,
+        warnings,
+        ..ReferenceTrack::empty(file, clock)
     };
     for (line, gga, f) in &sentences {
         if !gga {
@@ -372,7 +415,7 @@ pub fn parse_reference(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadE
         .comment(Some(b'#'))
         .flexible(true)
         .trim(csv::Trim::All)
-        .from_reader(bytes);
+        .from_reader(super::csv_rows::LastByte::new(bytes));
     let whole = |message: String| LoadError::File {
         file: file.to_string(),
         message,
@@ -393,67 +436,76 @@ pub fn parse_reference(bytes: &[u8], file: &str) -> Result<ReferenceTrack, LoadE
     let (ct, clat, clon) = (need("t_s")?, need("lat_deg")?, need("lon_deg")?);
     let calt = column("alt_m");
     let mut track = ReferenceTrack {
-        source: file.to_string(),
-        t_s: Vec::new(),
-        points: Vec::new(),
         has_alt: calt.is_some(),
-        clock: Clock::Ride,
+        ..ReferenceTrack::empty(file, Clock::Ride)
     };
-    for record in rdr.records() {
-        let record = record.map_err(|e| whole(format!("unreadable CSV: {e}")))?;
-        let line = record.position().map_or(0, |p| p.line());
-        let value = |c: usize, name: &str| -> Result<f64, LoadError> {
-            let field = |message: String| LoadError::Field {
-                file: file.to_string(),
-                line,
-                column: name.to_string(),
-                message,
-            };
-            let text = record
-                .get(c)
-                .ok_or_else(|| field("missing (the line is short)".into()))?;
-            let v: f64 = text
-                .parse()
-                .map_err(|_| field(format!("'{text}' is not a number")))?;
-            if v.is_finite() {
-                Ok(v)
-            } else {
-                Err(field(format!("'{text}' is not a finite number")))
-            }
-        };
-        let t = value(ct, "t_s")?;
-        let lat = value(clat, "lat_deg")?;
-        let lon = value(clon, "lon_deg")?;
-        let alt = match calt {
-            Some(c) => value(c, "alt_m")?,
-            None => f64::NAN,
-        };
-        if !(-90.0..=90.0).contains(&lat) || !(-180.0..=360.0).contains(&lon) {
-            return Err(LoadError::Field {
-                file: file.to_string(),
-                line,
-                column: if (-90.0..=90.0).contains(&lat) {
-                    "lon_deg"
+    // Read one ahead: an INS or a logger that stops while writing leaves
+    // a last line without its end, which is left out (and said) rather
+    // than losing the whole reference, and with it the fit.
+    let cut = super::csv_rows::each_record(
+        &mut rdr,
+        |rdr, record| {
+            rdr.read_byte_record(record)
+                .map_err(|e| whole(format!("unreadable CSV: {e}")))
+        },
+        |record, _| {
+            let line = record.position().map_or(0, |p| p.line());
+            let value = |c: usize, name: &str| -> Result<f64, LoadError> {
+                let field = |message: String| LoadError::Field {
+                    file: file.to_string(),
+                    line,
+                    column: name.to_string(),
+                    message,
+                };
+                let text = record
+                    .get(c)
+                    .map(String::from_utf8_lossy)
+                    .ok_or_else(|| field("missing (the line is short)".into()))?;
+                let v: f64 = text
+                    .parse()
+                    .map_err(|_| field(format!("'{text}' is not a number")))?;
+                if v.is_finite() {
+                    Ok(v)
                 } else {
-                    "lat_deg"
+                    Err(field(format!("'{text}' is not a finite number")))
                 }
-                .into(),
-                message: format!("({lat}, {lon}) is no latitude and longitude in degrees"),
-            });
-        }
-        if let Some(&last) = track.t_s.last()
-            && t <= last
-        {
-            return Err(LoadError::Field {
-                file: file.to_string(),
-                line,
-                column: "t_s".into(),
-                message: format!("time {t} s does not increase (the line before: {last} s)"),
-            });
-        }
-        track.t_s.push(t);
-        track.points.push(Geodetic::new(lat, lon, alt));
-    }
+            };
+            let t = value(ct, "t_s")?;
+            let lat = value(clat, "lat_deg")?;
+            let lon = value(clon, "lon_deg")?;
+            let alt = match calt {
+                Some(c) => value(c, "alt_m")?,
+                None => f64::NAN,
+            };
+            if !(-90.0..=90.0).contains(&lat) || !(-180.0..=360.0).contains(&lon) {
+                return Err(LoadError::Field {
+                    file: file.to_string(),
+                    line,
+                    column: if (-90.0..=90.0).contains(&lat) {
+                        "lon_deg"
+                    } else {
+                        "lat_deg"
+                    }
+                    .into(),
+                    message: format!("({lat}, {lon}) is no latitude and longitude in degrees"),
+                });
+            }
+            if let Some(&last) = track.t_s.last()
+                && t <= last
+            {
+                return Err(LoadError::Field {
+                    file: file.to_string(),
+                    line,
+                    column: "t_s".into(),
+                    message: format!("time {t} s does not increase (the line before: {last} s)"),
+                });
+            }
+            track.t_s.push(t);
+            track.points.push(Geodetic::new(lat, lon, alt));
+            Ok(())
+        },
+    )?;
+    track.warnings.extend(cut);
     if track.t_s.len() < 2 {
         return Err(whole(
             "a reference track needs at least two points with times".into(),
@@ -618,5 +670,69 @@ mod tests {
         assert!(e.contains("lat_deg") && e.contains("no latitude"), "{e}");
         let e = err("t_s,lat_deg,lon_deg\n0,1,2\n");
         assert!(e.contains("at least two"), "{e}");
+    }
+
+    /// A reference whose logger stopped while writing (a flat battery, a
+    /// recorder killed) keeps every point before the cut, and says so:
+    /// refused whole, it took the fit with it. Cut from the real files:
+    /// the comma drive's truth, the Garmin GPX and the SPAN GGA.
+    #[test]
+    fn a_reference_cut_short_keeps_the_points_before_the_cut() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared");
+        let read = |p: &str| std::fs::read(root.join(p)).unwrap();
+        // Cut inside a row: the short last row is left out, naming its line.
+        let csv = read("real/comma2k19-example1/truth.csv");
+        let whole = parse_reference(&csv, "truth.csv").unwrap();
+        assert!(whole.warnings.is_empty());
+        let cut = &csv[..200_020];
+        let r = parse_reference(cut, "truth.csv").unwrap();
+        assert_eq!(r.t_s[..], whole.t_s[..r.t_s.len()]);
+        assert!(r.t_s.len() > 4400 && r.t_s.len() < whole.t_s.len());
+        assert_eq!(r.warnings.len(), 1);
+        assert!(r.warnings[0].contains("truth.csv:4463") && r.warnings[0].contains("left out"));
+        // The same short row with its line end is bad input, as before.
+        let mut ended = cut.to_vec();
+        ended.push(b'\n');
+        let e = parse_reference(&ended, "truth.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("truth.csv:4463") && e.contains("short"), "{e}");
+
+        // GPX cut inside a track point: closed after the last whole one.
+        let gpx = read("formats/gpx/garmin-activity.gpx");
+        let whole = parse_gpx(&gpx, "a.gpx").unwrap();
+        let r = parse_gpx(&gpx[..150_000], "a.gpx").unwrap();
+        assert!(
+            r.t_s.len() > 300 && r.t_s.len() < whole.t_s.len(),
+            "{}",
+            r.t_s.len()
+        );
+        assert_eq!(r.t_s[..], whole.t_s[..r.t_s.len()]);
+        assert_eq!(r.points[..], whole.points[..r.points.len()]);
+        assert!(r.warnings.len() == 1 && r.warnings[0].contains("before the cut"));
+        // A file with its end and a fault of another kind, or cut before
+        // any whole point, is no GPX, as before.
+        let mut broken = gpx.clone();
+        broken.drain(100_000..100_010);
+        assert!(parse_gpx(&broken, "a.gpx").is_err());
+        assert!(parse_gpx(&gpx[..300], "a.gpx").is_err());
+
+        // NMEA cut inside a GGA: that sentence is left out, even where its
+        // fields still read (a cut height).
+        let gga = read("formats/nmea/MTV.Local1.SPAN.20200206-181434.gga");
+        let whole = parse_nmea(&gga, "s.gga").unwrap();
+        let text = std::str::from_utf8(&gga).unwrap();
+        let start = text[..100_000].rfind("$GPGGA").unwrap();
+        let cut = &text[..start + 60];
+        let r = parse_nmea(cut.as_bytes(), "s.gga").unwrap();
+        let full = parse_nmea(&gga[..start], "s.gga").unwrap();
+        assert_eq!(r.t_s, full.t_s);
+        assert!(r.t_s.len() > 100 && r.t_s.len() < whole.t_s.len());
+        assert!(
+            r.warnings.len() == 1 && r.warnings[0].contains("checksum"),
+            "{:?}",
+            r.warnings
+        );
+        assert!(full.warnings.is_empty());
     }
 }
