@@ -53,6 +53,44 @@ const fn key(k: &[u8; 4]) -> TagId {
     TagId::Unknown(u32::from_be_bytes(*k))
 }
 
+/// Why an MP4 cannot be read, where it is a recording the camera never
+/// finished: its top-level boxes run past the end of the file and there
+/// is no `moov` (the index of every sample, written last), as when the
+/// battery ran out or the card was pulled while recording. Without the
+/// index no telemetry sample can be found, so the file's own words are
+/// not "unsupported" but how to mend it.
+fn unfinished_mp4(path: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut f = std::fs::File::open(path).ok()?;
+    let len = f.metadata().ok()?.len();
+    let mut at = 0u64;
+    let mut head = [0u8; 16];
+    while at + 8 <= len {
+        f.seek(SeekFrom::Start(at)).ok()?;
+        let n = f.read(&mut head).ok()?;
+        if n < 8 {
+            return None;
+        }
+        let size = match u32::from_be_bytes([head[0], head[1], head[2], head[3]]) {
+            1 if n >= 16 => u64::from_be_bytes(head[8..16].try_into().ok()?),
+            0 => len - at,
+            size => u64::from(size),
+        };
+        if &head[4..8] == b"moov" || size < 8 {
+            return None;
+        }
+        if at + size > len {
+            let kind = String::from_utf8_lossy(&head[4..8]).into_owned();
+            return Some(format!(
+                "the recording was never finished: its '{kind}' box declares {size} bytes from byte {at}, the file ends {} bytes short, and it has no index ('moov'), as when the camera's battery ran out or the card was pulled while recording; the camera offers to repair such a file when the card is put back (GoPro's SOS), or a repair tool (untrunc, with a whole file of the same camera) rebuilds the index",
+                at + size - len
+            ));
+        }
+        at += size;
+    }
+    None
+}
+
 /// Read a camera file as a ride log.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
     let (mut stream, file) = super::open_file(path)?;
@@ -81,9 +119,10 @@ pub fn read(path: &Path) -> Result<RideLog, LoadError> {
     let (input, imu) = match parsed {
         Ok(Ok(x)) => x,
         Ok(Err(e)) => {
-            return Err(bad(format!(
-                "not a camera or telemetry file that telemetry-parser reads: {e}"
-            )));
+            return Err(bad(match unfinished_mp4(path) {
+                Some(why) => why,
+                None => format!("not a camera or telemetry file that telemetry-parser reads: {e}"),
+            }));
         }
         Err(_) => {
             return Err(bad(
