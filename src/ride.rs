@@ -119,6 +119,54 @@ impl RideLog {
         }
     }
 
+    /// `other`'s rows after this log's (their times already on its clock,
+    /// later than its last): a column that only one of them has is empty
+    /// (or, for wheel pulses, low) on the other's rows; channels are joined
+    /// by name. Metadata and warnings stay this log's.
+    pub fn append(&mut self, other: RideLog) {
+        fn join<T: Clone>(a: &mut Option<Vec<T>>, b: Option<Vec<T>>, n: usize, m: usize, empty: T) {
+            match (a.as_mut(), b) {
+                (Some(a), Some(b)) => a.extend(b),
+                (Some(a), None) => a.extend(std::iter::repeat_n(empty, m)),
+                (None, Some(b)) => {
+                    let mut v = vec![empty; n];
+                    v.extend(b);
+                    *a = Some(v);
+                }
+                (None, None) => {}
+            }
+        }
+        let (n, m) = (self.len(), other.len());
+        join(&mut self.wheel_pulse, other.wheel_pulse, n, m, false);
+        join(&mut self.odo_m, other.odo_m, n, m, None);
+        join(&mut self.speed_mps, other.speed_mps, n, m, None);
+        join(&mut self.gps_alt_m, other.gps_alt_m, n, m, None);
+        join(&mut self.gps_speed_mps, other.gps_speed_mps, n, m, None);
+        join(&mut self.gps_course_deg, other.gps_course_deg, n, m, None);
+        join(&mut self.gps_hacc_m, other.gps_hacc_m, n, m, None);
+        join(&mut self.gps_vacc_m, other.gps_vacc_m, n, m, None);
+        join(&mut self.gps_hdop, other.gps_hdop, n, m, None);
+        join(&mut self.gps_num_sats, other.gps_num_sats, n, m, None);
+        join(&mut self.baro_alt_m, other.baro_alt_m, n, m, None);
+        join(&mut self.accel_mps2, other.accel_mps2, n, m, None);
+        let mut theirs = other.channels;
+        for (name, column) in &mut self.channels {
+            match theirs.iter().position(|(other, _)| other == name) {
+                Some(k) => column.extend(theirs.remove(k).1),
+                None => column.extend(std::iter::repeat_n(None, m)),
+            }
+        }
+        for (name, column) in theirs {
+            let mut v = vec![None; n];
+            v.extend(column);
+            self.channels.push((name, v));
+        }
+        self.line.extend(other.line);
+        self.t_s.extend(other.t_s);
+        self.gyro_dps.extend(other.gyro_dps);
+        self.fix.extend(other.fix);
+    }
+
     pub fn len(&self) -> usize {
         self.t_s.len()
     }
@@ -172,5 +220,31 @@ mod tests {
         log.keep_rows(30..100);
         assert_eq!(log.len(), 10);
         assert_eq!(log.t_s[0], before.t_s[50]);
+    }
+
+    #[test]
+    fn append_joins_every_column_and_fills_what_one_side_lacks() {
+        let mut a = crate::testing::winding_log(5.0, 10.0);
+        a.channels = vec![("temp_c".into(), vec![Some(20.0); a.len()])];
+        let mut b = crate::testing::winding_log(5.0, 10.0);
+        b.accel_mps2 = Some(vec![Some([1.0; 3]); b.len()]);
+        b.channels = vec![("vbat_v".into(), vec![Some(4.0); b.len()])];
+        b.odo_m = None;
+        let (n, m) = (a.len(), b.len());
+        a.append(b.clone());
+        assert_eq!(a.len(), n + m);
+        assert_eq!(a.gyro_dps[n..], b.gyro_dps[..]);
+        assert_eq!(a.fix[n..], b.fix[..]);
+        let accel = a.accel_mps2.as_ref().unwrap();
+        assert!(accel[..n].iter().all(Option::is_none) && accel[n..].iter().all(Option::is_some));
+        let odo = a.odo_m.as_ref().unwrap();
+        assert_eq!(odo.len(), n + m);
+        assert!(odo[n..].iter().all(Option::is_none));
+        assert_eq!(a.channels.len(), 2);
+        for (name, column) in &a.channels {
+            assert_eq!(column.len(), n + m, "{name}");
+        }
+        assert_eq!(a.channels[1].1[n], Some(4.0));
+        assert_eq!(a.channels[0].1[n], None);
     }
 }

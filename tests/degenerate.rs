@@ -362,3 +362,53 @@ fn an_odometer_reset_mid_ride_is_no_distance() {
     );
     check_says(&reset, "odometer jumps", &line);
 }
+
+/// The path of a fitted log, row by row, with its RMS from the fixes.
+fn fitted_log(log: &gyropath::ride::RideLog) -> (Vec<[f64; 3]>, f64) {
+    let sig = Arc::new(Signals::from_log(log).expect("signals"));
+    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    rec.finish();
+    let path = rec.trajectory().p.iter().map(|p| [p.x, p.y, p.z]).collect();
+    (path, rec.stats().rms_horizontal_m)
+}
+
+/// A recording split into chapters (a GoPro's 4 GB files), each with its
+/// clock starting again at zero, joined as `gyropath` joins a GoPro
+/// recording's chapters (`import::chapters::append`: one sample step after
+/// the last sample) is the unsplit ride: the real comma drive cut in two,
+/// its second half's clock restarted, fits to the unsplit path within a
+/// centimetre. Fitted apart, the second half starts from an unknown
+/// heading, and the ride's path breaks at the seam.
+#[test]
+fn chapters_of_one_recording_joined_fit_as_the_unsplit_ride() {
+    let drive = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data/comma2k19-example1/ride.csv"
+    ))
+    .expect("the bundled comma drive");
+    let whole = parse(&drive, "ride.csv").expect("parse");
+    let n = whole.len();
+    let mut first = whole.clone();
+    first.keep_rows(0..n / 2);
+    let mut second = whole.clone();
+    second.keep_rows(n / 2..n);
+    let start = second.t_s[0];
+    for t in &mut second.t_s {
+        *t -= start;
+    }
+    let mut joined = first;
+    gyropath::import::chapters::append(&mut joined, second, "GX020001.MP4").expect("append");
+    assert_eq!(joined.len(), n);
+    assert!(joined.t_s.windows(2).all(|w| w[1] > w[0]));
+    // The seam falls within a sample step of where the drive had it.
+    let seam = (joined.t_s[n / 2] - whole.t_s[n / 2]).abs();
+    assert!(seam < 0.005, "the seam is {seam} s off");
+    let (path, rms) = fitted_log(&joined);
+    let (clean, clean_rms) = fitted_log(&whole);
+    let worst = farthest_apart(&path, &clean);
+    assert!(worst < 0.01, "paths {worst} m apart");
+    assert!(
+        (rms - clean_rms).abs() < 0.001,
+        "{rms} against {clean_rms} m"
+    );
+}

@@ -505,3 +505,62 @@ fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
     assert!(e.contains("t0_unix_s"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A GoPro recording's chapters (`GX010001.MP4`, `GX020001.MP4`: the
+/// camera's 4 GB files) are read as one ride when its first chapter is
+/// opened, and a batch over their folder fits it once. Made of two copies
+/// of the real sample, so the second "chapter" carries the first's UTC
+/// start: that is said (a chapter from another recording), the placement
+/// stays seamless.
+#[test]
+fn a_gopro_recordings_chapters_read_as_one_ride() {
+    let sample = formats().join("gopro_gpmf/max-heromode.mp4");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let first = dir.path().join("GX010001.MP4");
+    let second = dir.path().join("GX020001.MP4");
+    std::fs::copy(&sample, &first).expect("copy");
+    std::fs::copy(&sample, &second).expect("copy");
+    let alone = gyropath::pipeline::open(&sample, &ImportOptions::default()).expect("sample");
+    let joined = gyropath::pipeline::open(&first, &ImportOptions::default()).expect("chapters");
+    let (n, log) = (alone.log.len(), &joined.log);
+    assert_eq!(log.len(), 2 * n);
+    assert_eq!(log.fix_count(), 2 * alone.log.fix_count());
+    assert!(log.t_s.windows(2).all(|w| w[1] > w[0]));
+    let step = alone.log.t_s[n - 1] - alone.log.t_s[n - 2];
+    let seam = log.t_s[n] - log.t_s[n - 1];
+    assert!(
+        seam > 0.0 && seam < 3.0 * step,
+        "seam {seam} s, step {step} s"
+    );
+    let warnings = joined.warnings();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("chapter that follows") && w.contains("GX020001.MP4")),
+        "{warnings:?}"
+    );
+    assert!(
+        warnings.iter().any(|w| w.contains("GNSS clock")),
+        "{warnings:?}"
+    );
+    // The later chapter alone reads alone, and says where the whole is.
+    let later = gyropath::pipeline::open(&second, &ImportOptions::default()).expect("chapter 2");
+    assert_eq!(later.log.len(), n);
+    assert!(
+        later.warnings().iter().any(|w| w.contains("later chapter")),
+        "{:?}",
+        later.warnings()
+    );
+    // A batch over the folder takes the recording once.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_gyropath"))
+        .args(["fit", dir.path().to_str().unwrap(), "--out-dir"])
+        .arg(dir.path().join("out"))
+        .output()
+        .expect("run gyropath");
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("1 rides,"), "{said}");
+}

@@ -21,7 +21,8 @@ const MAX_FOLDER_DEPTH: usize = 8;
 /// are not entered, nor the batch's output folder (`rides/out` of an earlier
 /// `--out-dir rides/out`: its paths are no rides), and a file that is the
 /// batch's reference track (`truth.csv` beside a ride for `--reference
-/// truth.csv`) is not a ride.
+/// truth.csv`) is not a ride, nor is a GoPro recording's later chapter
+/// beside its first (which reads them all as one ride).
 fn collect_rides(
     inputs: &[PathBuf],
     reference: Option<&Path>,
@@ -76,7 +77,10 @@ fn rides_in(dir: &Path, skip: &Skip, depth: usize, rides: &mut Vec<PathBuf>) -> 
             if !linked && !output && depth < MAX_FOLDER_DEPTH {
                 rides_in(&path, skip, depth + 1, rides)?;
             }
-        } else if gyropath::import::is_ride_file(&path) && !is_reference(&path, skip.reference) {
+        } else if gyropath::import::is_ride_file(&path)
+            && !is_reference(&path, skip.reference)
+            && gyropath::import::chapters::first_of(&path).is_none()
+        {
             rides.push(path);
         }
     }

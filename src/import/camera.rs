@@ -25,7 +25,7 @@
 //! and reported as the file's error, never the app's end.
 
 use std::collections::BTreeMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -91,8 +91,52 @@ fn unfinished_mp4(path: &Path) -> Option<String> {
     None
 }
 
-/// Read a camera file as a ride log.
+/// Read a camera file as a ride log; a GoPro recording's first chapter
+/// with the chapters that follow it beside it ([`super::chapters`]), as one.
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
+    let mut log = read_file(path)?;
+    let file = log.source.clone();
+    let following = super::chapters::following(path);
+    for next in &following {
+        let other = read_file(next)?;
+        super::chapters::append(&mut log, other, &next.display().to_string())?;
+    }
+    if !following.is_empty() {
+        let names: Vec<String> = std::iter::once(path)
+            .chain(following.iter().map(PathBuf::as_path))
+            .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
+            .collect();
+        log.warnings.push(format!(
+            "{file}: read with the {} that follow{} it as one recording of {:.0} s ({}); --between fits a part of it",
+            match following.len() {
+                1 => "chapter".to_string(),
+                n => format!("{n} chapters"),
+            },
+            if following.len() == 1 { "s" } else { "" },
+            log.t_s.last().copied().unwrap_or(0.0) - log.t_s.first().copied().unwrap_or(0.0),
+            names.join(" + ")
+        ));
+        if let Some(source) = log.metadata.get_mut("source") {
+            source.push_str(&format!(" + {} chapters", following.len()));
+        }
+    } else if let Some(first) = super::chapters::first_of(path) {
+        log.warnings.push(format!(
+            "{file}: a later chapter of a GoPro recording, read alone: its path starts without the chapters before it; open {} to read the whole recording as one ride",
+            first.display()
+        ));
+    }
+    if log.fix_count() == 0 {
+        return Err(LoadError::File {
+            file,
+            message: "the recording has no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix): a path needs GNSS fixes".into(),
+        });
+    }
+    Ok(log)
+}
+
+/// One camera file as a ride log (which may hold no fix: a chapter in a
+/// tunnel, whose recording has fixes in its other chapters).
+fn read_file(path: &Path) -> Result<RideLog, LoadError> {
     let (mut stream, file) = super::open_file(path)?;
     let bad = |message: String| LoadError::File {
         file: file.clone(),
@@ -208,9 +252,9 @@ pub fn read(path: &Path) -> Result<RideLog, LoadError> {
         }
     }
     if place_gnss(&mut log, &samples).is_none() {
-        return Err(bad(format!(
-            "{camera}: the file has no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix): a path needs GNSS fixes"
-        )));
+        log.warnings.push(format!(
+            "{file}: {camera}: no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix)"
+        ));
     }
     if let Some((utc, t)) = utc_of_first {
         log.metadata

@@ -15,6 +15,7 @@
 //! (every format, the checks and the mounting, with worked examples).
 
 pub mod camera;
+pub mod chapters;
 pub mod checks;
 pub mod comma2k19;
 mod csv_rows;
