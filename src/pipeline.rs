@@ -13,6 +13,7 @@ use std::sync::Arc;
 
 use crate::diagnosis::reference::{self, Matched, ReferenceError};
 use crate::export::FitReport;
+use crate::import::reference::Clock;
 use crate::import::{
     self, ImportOptions, Imported, LoadError, ReferenceTrack, SourceKind, Topics, Verdict,
 };
@@ -33,12 +34,57 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
 /// on it by the ride's `t0_unix_s`) and match it to `signals`' rows: an
 /// error when it cannot belong to the ride (no time in common, far from
 /// every fix).
+///
+/// A UTC track for a ride that does not say when it started is placed on
+/// the ride's clock by its track where that is unambiguous
+/// ([`crate::diagnosis::reference_clock`]), with a warning that says so;
+/// else it is refused, asking for the ride's start.
 pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference, PipelineError> {
-    let track = import::read_reference(path)?.on_ride_clock(
+    let read = import::read_reference(path)?;
+    let utc = matches!(read.clock, Clock::Unix | Clock::TimeOfDay);
+    let track = match read.clone().on_ride_clock(
         signals.t0_unix_s,
         signals.t0_boot_s,
         &signals.source,
-    )?;
+    ) {
+        Ok(track) => track,
+        Err(refused) if utc && signals.t0_unix_s.is_none() => {
+            let clock =
+                crate::diagnosis::reference_clock::track_clock(&read, signals).ok_or(refused)?;
+            let mut track = read;
+            for t in &mut track.t_s {
+                *t -= clock.offset_s;
+            }
+            let start = match track.clock {
+                Clock::Unix => format!("t0_unix_s {:.2}", clock.offset_s),
+                _ => format!("a start at {:.2} s of the UTC day", clock.offset_s),
+            };
+            track.clock = Clock::Ride;
+            // What a clock off by a tenth of a second costs along the
+            // track at the ride's mean speed.
+            let speed = signals.distance.iter().sum::<f64>() / signals.duration().max(1e-9);
+            track.warnings.push(format!(
+                "{}: its times are UTC and {} does not say when it started (no t0_unix_s): placed on the ride's clock by its track ({start}, {}; {} fixes a median of {:.1} m from it there). A clock found so carries that sensor's latency, hundredths to tenths of a second: at the ride's mean {speed:.1} m/s, 0.1 s is {:.1} m along the track, so the error along the track{} is uncertain by that much; a '# t0_unix_s:' line in the ride places it by the clock instead",
+                track.source,
+                signals.source,
+                if clock.by_distance {
+                    "where the odometer's distance matches the track's"
+                } else {
+                    "where the fixes lie nearest it (the odometer's speed varies too little to tell)"
+                },
+                clock.fixes,
+                clock.median_m,
+                0.1 * speed,
+                if clock.by_distance {
+                    ""
+                } else {
+                    " (and any GPS lag, which the fixes' own latency hides)"
+                }
+            ));
+            track
+        }
+        Err(refused) => return Err(refused.into()),
+    };
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))
 }

@@ -1372,17 +1372,42 @@ fn gpx_and_nmea_references_are_put_on_the_rides_clock() {
         (rms[1] - rms[0]).abs() < 0.01 && (rms[2] - rms[0]).abs() < 0.01,
         "{rms:?}"
     );
-    // The bundled ride has no t0_unix_s: a UTC reference cannot be placed.
+    // The bundled ride has no t0_unix_s: the UTC reference is placed on
+    // its clock by its track (the odometer's distance), with a warning, and
+    // measures the fit as the same track on the ride's clock does (the
+    // wheel pulses' timing, 0.09 s here, moves it by a few centimetres).
+    let json = dir.path().join("placed.json");
     let out = gyropath(&[
         "fit",
         s(&data.join("sample-ride.csv")),
         "--reference",
         s(&dir.path().join("truth.gpx")),
+        "--json",
+        s(&json),
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("truth.gpx") && err.contains("placed on the ride's clock by its track"),
+        "{err}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let placed = r["reference"]["horizontal"]["rms_m"].as_f64().unwrap();
+    assert!((placed - rms[0]).abs() < 0.1, "{placed} against {}", rms[0]);
+    // A track of another place tells no clock: refused, asking for the start.
+    let elsewhere = dir.path().join("elsewhere.gpx");
+    std::fs::write(&elsewhere, gpx.replace("lat=\"4", "lat=\"3")).unwrap();
+    let out = gyropath(&[
+        "fit",
+        s(&data.join("sample-ride.csv")),
+        "--reference",
+        s(&elsewhere),
     ]);
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
-        err.contains("truth.gpx") && err.contains("has no t0_unix_s"),
+        err.contains("elsewhere.gpx") && err.contains("has no t0_unix_s"),
         "{err}"
     );
 }

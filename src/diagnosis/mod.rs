@@ -7,6 +7,7 @@
 pub mod absurd;
 pub mod ranking;
 pub mod reference;
+pub mod reference_clock;
 pub mod residuals;
 pub mod structure;
 pub mod validation;
