@@ -551,6 +551,21 @@ fn a_gopro_recordings_chapters_read_as_one_ride() {
         "{:?}",
         later.warnings()
     );
+    // A last chapter that was never finished (the battery ran out: no
+    // index) ends the recording at the chapter before it, and is said.
+    let third = dir.path().join("GX030001.MP4");
+    let bytes = std::fs::read(&sample).expect("read");
+    std::fs::write(&third, &bytes[..bytes.len() * 7 / 10]).expect("write");
+    let ended = gyropath::pipeline::open(&first, &ImportOptions::default()).expect("two chapters");
+    assert_eq!(ended.log.len(), 2 * n);
+    assert!(
+        ended.warnings().iter().any(|w| w.contains("GX030001.MP4")
+            && w.contains("never finished")
+            && w.contains("up to the chapter before")),
+        "{:?}",
+        ended.warnings()
+    );
+    std::fs::remove_file(&third).expect("rm");
     // A batch over the folder takes the recording once.
     let out = std::process::Command::new(env!("CARGO_BIN_EXE_gyropath"))
         .args(["fit", dir.path().to_str().unwrap(), "--out-dir"])

@@ -96,10 +96,21 @@ fn unfinished_mp4(path: &Path) -> Option<String> {
 pub fn read(path: &Path) -> Result<RideLog, LoadError> {
     let mut log = read_file(path)?;
     let file = log.source.clone();
-    let following = super::chapters::following(path);
-    for next in &following {
-        let other = read_file(next)?;
-        super::chapters::append(&mut log, other, &next.display().to_string())?;
+    let mut following = super::chapters::following(path);
+    // A later chapter that cannot be read (the last one, never finished
+    // when the battery ran out) ends the recording there, and is said: the
+    // chapters before it are whole.
+    for (k, next) in following.iter().enumerate() {
+        match read_file(next) {
+            Ok(other) => super::chapters::append(&mut log, other, &next.display().to_string())?,
+            Err(e) => {
+                log.warnings.push(format!(
+                    "{e}: the recording is read up to the chapter before it"
+                ));
+                following.truncate(k);
+                break;
+            }
+        }
     }
     if !following.is_empty() {
         let names: Vec<String> = std::iter::once(path)
