@@ -838,10 +838,16 @@ impl Row<'_, '_> {
         match (self.number(c.lat)?, self.number(c.lon)?) {
             (Some(la), Some(lo)) => {
                 if !(-90.0..=90.0).contains(&la) {
-                    return Err(err("lat_deg", format!("{la} is outside -90..90")));
+                    return Err(err(
+                        "lat_deg",
+                        format!("{la} is outside -90..90{}", coordinate_hint(la, lo)),
+                    ));
                 }
                 if !(-180.0..=360.0).contains(&lo) {
-                    return Err(err("lon_deg", format!("{lo} is outside -180..360")));
+                    return Err(err(
+                        "lon_deg",
+                        format!("{lo} is outside -180..360{}", coordinate_hint(la, lo)),
+                    ));
                 }
                 Ok(Some((la, lo)))
             }
@@ -943,6 +949,27 @@ pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
         writeln!(w, "{line}")?;
     }
     Ok(())
+}
+
+/// What a fix out of range most likely is, for its error: integers of
+/// degrees times 10^7 (as u-blox and ArduPilot log them), or the two
+/// columns swapped (a longitude beyond 90 degrees read as latitude).
+fn coordinate_hint(lat: f64, lon: f64) -> String {
+    // Beyond any degree (1e5 is 0.01 deg times 10^7) and within range divided.
+    let e7 = |v: f64, limit: f64| v.abs() >= 1e5 && (v / 1e7).abs() <= limit;
+    if e7(lat, 90.0) || e7(lon, 180.0) {
+        format!(
+            " (degrees times 10^7, as u-blox and ArduPilot log them? {:.7}, {:.7} in degrees: divide both by 10^7)",
+            lat / 1e7,
+            lon / 1e7
+        )
+    } else if (-90.0..=90.0).contains(&lon) && (-180.0..=180.0).contains(&lat) {
+        format!(
+            " (lat_deg and lon_deg swapped? {lat} is a longitude and {lon} a latitude: swap the two names in the header)"
+        )
+    } else {
+        String::new()
+    }
 }
 
 #[cfg(test)]
@@ -1136,6 +1163,18 @@ mod tests {
         assert!(e.starts_with("bad.csv:6: column 'wheel_pulse'"), "{e}");
         let e = err(&GOOD.replace("47.49788883,19.04019799", "47.49788883,"));
         assert!(e.starts_with("bad.csv:4: column 'lon_deg'"), "{e}");
+        // Degrees times 10^7, and the two columns swapped, are named.
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "474978888,190401980"));
+        assert!(
+            e.starts_with("bad.csv:4: column 'lat_deg': 474978888 is outside -90..90")
+                && e.contains("degrees times 10^7")
+                && e.contains("47.4978888, 19.0401980"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "-122.47,37.72"));
+        assert!(e.contains("swapped") && !e.contains("10^7"), "{e}");
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "95.0,400.0"));
+        assert!(!e.contains("swapped") && !e.contains("10^7"), "{e}");
         let e = err("# only comments\n");
         assert!(e.contains("no header"), "{e}");
         let e = err(GOOD.split("0.00,").next().unwrap());
