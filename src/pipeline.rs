@@ -42,15 +42,14 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
 pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference, PipelineError> {
     let read = import::read_reference(path)?;
     let utc = matches!(read.clock, Clock::Unix | Clock::TimeOfDay);
-    let track = match read.clone().on_ride_clock(
-        signals.t0_unix_s,
-        signals.t0_boot_s,
-        &signals.source,
-    ) {
-        Ok(track) => track,
-        Err(refused) if utc && signals.t0_unix_s.is_none() => {
-            let clock =
-                crate::diagnosis::reference_clock::track_clock(&read, signals).ok_or(refused)?;
+    let placed = (utc && signals.t0_unix_s.is_none())
+        .then(|| crate::diagnosis::reference_clock::track_clock(&read, signals))
+        .flatten();
+    let track = match placed {
+        // Without a clock the track tells, the ride's own clock decides
+        // (and refuses a UTC track, asking for the ride's start).
+        None => read.on_ride_clock(signals.t0_unix_s, signals.t0_boot_s, &signals.source)?,
+        Some(clock) => {
             let mut track = read;
             for t in &mut track.t_s {
                 *t -= clock.offset_s;
@@ -83,7 +82,6 @@ pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference,
             ));
             track
         }
-        Err(refused) => return Err(refused.into()),
     };
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))

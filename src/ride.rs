@@ -183,6 +183,14 @@ impl RideLog {
     }
 
     /// Number of GNSS speed samples (0 without the column).
+    /// The Unix time (s) of `t = 0` from the `t0_unix_s` metadata, where
+    /// the log gives it as a number.
+    pub fn t0_unix_s(&self) -> Option<f64> {
+        self.metadata
+            .get("t0_unix_s")
+            .and_then(|v| v.trim().parse::<f64>().ok())
+    }
+
     pub fn gnss_speed_samples(&self) -> usize {
         self.gps_speed_mps
             .as_ref()

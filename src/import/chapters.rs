@@ -158,12 +158,7 @@ pub fn append(log: &mut RideLog, mut next: RideLog, file: &str) -> Result<(), Lo
         });
     }
     let offset = last + step - first_next;
-    let utc = |l: &RideLog| {
-        l.metadata
-            .get("t0_unix_s")
-            .and_then(|v| v.trim().parse::<f64>().ok())
-    };
-    match (utc(log), utc(&next)) {
+    match (log.t0_unix_s(), next.t0_unix_s()) {
         (Some(t0), Some(t0_next)) => {
             let apart = (t0_next - t0) - offset;
             if apart.abs() > UTC_TOLERANCE_S {

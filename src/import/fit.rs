@@ -254,11 +254,7 @@ fn merge_activity(log: &mut RideLog, activity: &Activity, file: &str) -> Result<
             "the FIT file logs one distance: at least two are needed".into(),
         ));
     }
-    let t0 = log
-        .metadata
-        .get("t0_unix_s")
-        .and_then(|v| v.trim().parse::<f64>().ok())
-        .ok_or_else(|| {
+    let t0 = log.t0_unix_s().ok_or_else(|| {
             error(format!(
                 "{} has no t0_unix_s (its start in UTC), so the FIT's distance cannot be matched to it by time",
                 log.source

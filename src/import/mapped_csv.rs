@@ -580,11 +580,7 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
     }
     let mut log = join(streams)?;
     // Extra channels, interpolated at the rows' times.
-    let t0 = log
-        .metadata
-        .get("t0_unix_s")
-        .and_then(|v| v.parse::<f64>().ok())
-        .unwrap_or(0.0);
+    let t0 = log.t0_unix_s().unwrap_or(0.0);
     for name in &map.channels {
         let samples: Vec<(f64, f64)> = times
             .iter()
