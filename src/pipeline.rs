@@ -130,6 +130,16 @@ impl PipelineError {
             _ => None,
         }
     }
+
+    /// Whether the log has no GPS fix at all, which a GPS track of the same
+    /// ride (`--gps-track`, the app's "GPS track..." button) would give it.
+    pub fn needs_fixes(&self) -> bool {
+        matches!(
+            self,
+            Self::Load(LoadError::NoFix { .. })
+                | Self::Signals(crate::signals::SignalError::NoFix { .. })
+        )
+    }
 }
 
 /// What a finished fit is: a result, or a failure with its reasons.

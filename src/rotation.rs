@@ -153,6 +153,13 @@ pub fn compass_deg(east: f64, north: f64) -> f64 {
     if h < 0.0 { h + 360.0 } else { h }
 }
 
+/// An angle (rad) brought into `[-pi, pi)`: the difference of two headings
+/// or courses as the shorter turn between them.
+pub fn wrap_pi(a: f64) -> f64 {
+    let two_pi = std::f64::consts::TAU;
+    a - two_pi * ((a + std::f64::consts::PI) / two_pi).floor()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -28,6 +28,10 @@ pub enum SignalError {
         column: String,
         message: String,
     },
+    /// No GPS fix in the whole log: a GPS track of the same ride can give
+    /// it its fixes (`--gps-track`).
+    #[error("{file}: {message}")]
+    NoFix { file: String, message: String },
     /// A pause in the log (see [`pause`]), with the time windows (log
     /// clock, s) either side of its longest one, each of which can be fitted.
     #[error("{file}: {message}")]
@@ -504,15 +508,19 @@ impl Signals {
             warnings.push(w);
         }
         let usable = |row: usize| log.fix[row].is_some() && !blunders.contains(row);
-        let first = (0..n).find(|&row| usable(row)).ok_or_else(|| {
-            unusable(if blunders.is_empty() {
-                "the log has no GPS fix (lat_deg/lon_deg are empty on every row)".into()
-            } else {
-                format!(
-                    "the log has no GPS fix but blunders ({} at 0, 0, a receiver's placeholder while it has no fix)",
-                    blunders.null_island
-                )
-            })
+        let first = (0..n).find(|&row| usable(row)).ok_or_else(|| SignalError::NoFix {
+            file: file.clone(),
+            message: format!(
+                "the log has no GPS fix ({}); a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA) gives it fixes: --gps-track FILE",
+                if blunders.is_empty() {
+                    "lat_deg/lon_deg are empty on every row".to_string()
+                } else {
+                    format!(
+                        "only blunders: {} at 0, 0, a receiver's placeholder while it has no fix",
+                        blunders.null_island
+                    )
+                }
+            ),
         })?;
         let (lat0, lon0) = log.fix[first].unwrap_or_default();
         let alt0 = log

@@ -912,3 +912,85 @@ fn a_ride_refused_for_a_pause_offers_each_side_of_it() {
         .is_some()));
     h.get_by_label("Fit before the pause (0-300 s)");
 }
+
+/// A log without GPS (the Berlin drive's rows with their fixes emptied and
+/// no start time) is refused with a "GPS track..." button; read with the
+/// drive's reference as a GPX in UTC (what a watch would have logged, the
+/// file the button's dialog picks), it loads with the fixes placed by the
+/// vehicle's turns, and the Source panel names the track.
+#[test]
+fn a_log_without_gps_offers_a_gps_track_and_loads_with_it() {
+    let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let ride = std::fs::read_to_string(berlin.join("ride.csv")).expect("ride");
+    let mut bare = String::new();
+    for line in ride.lines() {
+        let f: Vec<&str> = line.split(',').collect();
+        if line.starts_with('#') || f.len() < 8 || f[0] == "t_s" {
+            bare.push_str(line);
+        } else {
+            bare.push_str(&[&f[..5], &["", "", ""]].concat().join(","));
+        }
+        bare.push('\n');
+    }
+    let mut gpx = String::from(
+        "<?xml version=\"1.0\"?>\n<gpx version=\"1.1\" creator=\"test\" xmlns=\"http://www.topografix.com/GPX/1/1\"><trk><trkseg>\n",
+    );
+    let truth = std::fs::read_to_string(berlin.join("truth.csv")).expect("truth");
+    for line in truth
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("t_s"))
+    {
+        let f: Vec<&str> = line.split(',').collect();
+        let sod = 80_000.0 + f[0].parse::<f64>().expect("t_s");
+        gpx.push_str(&format!(
+            "<trkpt lat=\"{}\" lon=\"{}\"><time>2023-11-14T{:02}:{:02}:{:06.3}Z</time></trkpt>\n",
+            f[1],
+            f[2],
+            (sod / 3600.0).floor(),
+            ((sod % 3600.0) / 60.0).floor(),
+            sod % 60.0
+        ));
+    }
+    gpx.push_str("</trkseg></trk></gpx>\n");
+    let (ride_path, track) = (dir.path().join("nogps.csv"), dir.path().join("watch.gpx"));
+    std::fs::write(&ride_path, bare).expect("write");
+    std::fs::write(&track, gpx).expect("write");
+    let app = GyropathApp::new(
+        manual_settings(),
+        gyropath::app::worker::RideSource::file(ride_path),
+        || {},
+    );
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .error
+        .is_some()));
+    let error = h.state().error.clone().expect("error");
+    assert!(error.contains("no GPS fix"), "{error}");
+    h.get_by_label("GPS track...");
+    let source = h
+        .state()
+        .track_for
+        .clone()
+        .expect("a source to read with a track");
+    let with_track = source.with_gps_track(Some(track)).expect("a file");
+    h.state_mut()
+        .apply(gyropath::app::Command::Open(with_track));
+    assert!(
+        step_until(&mut h, Duration::from_secs(60), |a| a
+            .ride
+            .as_ref()
+            .is_some_and(|_| a.loading.is_none())),
+        "not loaded: {:?}",
+        h.state().error
+    );
+    assert!(h.state().error.is_none() && h.state().track_for.is_none());
+    h.get_by_label("GPS: watch.gpx");
+    let ride = h.state().ride.clone().expect("ride");
+    assert!(
+        ride.duration_s > 130.0 && ride.duration_s < 141.0,
+        "{}",
+        ride.duration_s
+    );
+}

@@ -1530,3 +1530,132 @@ fn a_reference_cut_short_measures_the_fit_over_what_it_holds() {
         "{warned:?}"
     );
 }
+
+/// A camera or phone log without GPS, and a watch's GPX of the same drive:
+/// the Berlin drive's rows with their fixes emptied and no start time, and
+/// its reference track as a 1 Hz GPX in UTC (2023-11-14 22:13:20 + t).
+#[test]
+fn a_gps_track_gives_a_log_without_gps_its_fixes_placed_by_the_turns() {
+    let berlin = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/real/smartloc-berlin-potsdamer-platz");
+    let dir = tempfile::tempdir().unwrap();
+    let ride = std::fs::read_to_string(berlin.join("ride.csv")).unwrap();
+    let mut bare = String::new();
+    let mut columns: Vec<String> = Vec::new();
+    let mut fixes = Vec::new();
+    for line in ride.lines() {
+        if line.starts_with('#') {
+            bare.push_str(line);
+        } else if columns.is_empty() {
+            columns = line.split(',').map(str::to_string).collect();
+            bare.push_str(line);
+        } else {
+            let at = |name: &str| columns.iter().position(|c| c == name).unwrap();
+            let mut f: Vec<&str> = line.split(',').collect();
+            if !f[at("lat_deg")].is_empty() {
+                fixes.push((
+                    f[0].to_string(),
+                    f[at("lat_deg")].to_string(),
+                    f[at("lon_deg")].to_string(),
+                ));
+            }
+            for name in ["lat_deg", "lon_deg", "gps_alt_m"] {
+                f[at(name)] = "";
+            }
+            bare.push_str(&f.join(","));
+        }
+        bare.push('\n');
+    }
+    let gpx = |points: &mut dyn Iterator<Item = (f64, String, String)>| {
+        let mut g = String::from(
+            "<?xml version=\"1.0\"?>\n<gpx version=\"1.1\" creator=\"test\" xmlns=\"http://www.topografix.com/GPX/1/1\"><trk><trkseg>\n",
+        );
+        for (t, lat, lon) in points {
+            let sod = 80_000.0 + t;
+            let (h, m, sec) = (
+                (sod / 3600.0).floor(),
+                ((sod % 3600.0) / 60.0).floor(),
+                sod % 60.0,
+            );
+            g.push_str(&format!(
+                "<trkpt lat=\"{lat}\" lon=\"{lon}\"><time>2023-11-14T{h:02}:{m:02}:{sec:06.3}Z</time></trkpt>\n"
+            ));
+        }
+        g.push_str("</trkseg></trk></gpx>\n");
+        g
+    };
+    let truth = std::fs::read_to_string(berlin.join("truth.csv")).unwrap();
+    let mut watch = truth
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("t_s"))
+        .filter_map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            let t: f64 = f[0].parse().ok()?;
+            ((t - t.round()).abs() < 1e-6).then(|| (t, f[1].to_string(), f[2].to_string()))
+        });
+    let (ride_path, watch_path, city_path) = (
+        dir.path().join("nogps.csv"),
+        dir.path().join("watch.gpx"),
+        dir.path().join("city.gpx"),
+    );
+    std::fs::write(&ride_path, bare).unwrap();
+    std::fs::write(&watch_path, gpx(&mut watch)).unwrap();
+    std::fs::write(
+        &city_path,
+        gpx(&mut fixes
+            .into_iter()
+            .map(|(t, a, b)| (t.parse().unwrap(), a, b))),
+    )
+    .unwrap();
+
+    // Without a track: the error names the option.
+    let out = gyropath(&["fit", s(&ride_path), "--quiet"]);
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("no GPS fix") && e.contains("--gps-track"), "{e}");
+
+    // The watch's track: placed within 0.2 s of its start (the yaw-rate
+    // sensor's 5 Hz rows read 0.1 s late), and fitted close to the truth.
+    let report = dir.path().join("r.json");
+    let out = gyropath(&[
+        "fit",
+        s(&ride_path),
+        "--gps-track",
+        s(&watch_path),
+        "--reference",
+        s(&berlin.join("truth.csv")),
+        "--json",
+        s(&report),
+    ]);
+    let (stdout, stderr) = (
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr),
+    );
+    assert!(out.status.success(), "{stderr}");
+    let placed = stderr
+        .split("t0_unix_s ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|v| v.parse::<f64>().ok())
+        .unwrap_or_else(|| panic!("{stderr}"));
+    assert!((placed - 1_700_000_000.0).abs() < 0.2, "{placed}: {stderr}");
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let rms = r["reference"]["horizontal"]["rms_m"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("{}", r["reference"]));
+    assert!(rms < 2.0, "{rms} m: {stdout}");
+
+    // The city's own fixes, 20 m off: too noisy to read turns from,
+    // refused with the way out.
+    let out = gyropath(&[
+        "fit",
+        s(&ride_path),
+        "--gps-track",
+        s(&city_path),
+        "--quiet",
+    ]);
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("turns") && e.contains("t0_unix_s:"), "{e}");
+}

@@ -106,6 +106,14 @@ impl GyropathApp {
                         commands.push(Command::Open(source.clone()));
                     }
                 }
+                if let Some(source) = &self.track_for
+                    && ui
+                        .button("GPS track...")
+                        .on_hover_text("The fixes of a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA), matched by UTC or by the vehicle's turns")
+                        .clicked()
+                {
+                    commands.push(Command::PickGpsTrack(source.clone()));
+                }
                 if ui.small_button("Dismiss").clicked() {
                     commands.push(Command::DismissError);
                 }

@@ -109,6 +109,9 @@ pub enum Command {
     /// Pick a bike computer's activity (Garmin FIT) whose wheel distance
     /// becomes the loaded ride's odometer.
     PickWheel,
+    /// Pick a GPS track of the same ride (GPX, FIT, NMEA, CSV) whose points
+    /// become this source's fixes, and read it so.
+    PickGpsTrack(RideSource),
 }
 
 /// One row of the model history: a finished fit of one model.
@@ -137,6 +140,8 @@ enum Picked {
     Ride(PathBuf),
     Reference(PathBuf),
     Wheel(PathBuf),
+    /// A GPS track for this ride source.
+    GpsTrack(RideSource, PathBuf),
     Export(ExportKind, PathBuf),
 }
 
@@ -150,6 +155,9 @@ pub struct GyropathApp {
     pub error: Option<String>,
     /// What the error offers instead (a ride refused for a pause: each side of it).
     pub retry: Vec<(String, RideSource)>,
+    /// A ride refused for having no GPS fix, to read again with a GPS track
+    /// that the user picks (the error's "GPS track..." button).
+    pub track_for: Option<RideSource>,
     pub status: Option<String>,
     pub history: Vec<HistoryRow>,
     pub diagnosis: Option<crate::diagnosis::Diagnosis>,
@@ -233,6 +241,7 @@ impl GyropathApp {
             loading: None,
             error: None,
             retry: Vec::new(),
+            track_for: None,
             status: None,
             history: Vec::new(),
             diagnosis: None,
@@ -259,6 +268,7 @@ impl GyropathApp {
                     self.loading = None;
                     self.error = None;
                     self.retry.clear();
+                    self.track_for = None;
                     if let RideSource::Path(p, _) = &view.source {
                         self.settings.recent.retain(|r| r != p);
                         self.settings.recent.insert(0, p.clone());
@@ -274,11 +284,16 @@ impl GyropathApp {
                         self.worker.send(Request::Run);
                     }
                 }
-                Update::LoadFailed { message, retry } => {
+                Update::LoadFailed {
+                    message,
+                    retry,
+                    track_for,
+                } => {
                     self.loading = None;
                     self.run_on_load = false;
                     self.error = Some(format!("could not load the ride: {message}"));
                     self.retry = retry;
+                    self.track_for = track_for;
                 }
                 Update::Snapshot(s) => {
                     self.record_history(&s);
@@ -355,6 +370,11 @@ impl GyropathApp {
                 Picked::Wheel(fit) => {
                     if let Some(reload) = self.ride.as_ref().and_then(|r| r.source.with_wheel(fit))
                     {
+                        self.apply(Command::Open(reload));
+                    }
+                }
+                Picked::GpsTrack(source, track) => {
+                    if let Some(reload) = source.with_gps_track(Some(track)) {
                         self.apply(Command::Open(reload));
                     }
                 }
@@ -484,6 +504,20 @@ impl GyropathApp {
                     }
                 });
             }
+            Command::PickGpsTrack(source) => {
+                let tx = self.picked_tx.clone();
+                spawn_dialog(move || {
+                    if let Some(p) = rfd::FileDialog::new()
+                        .add_filter(
+                            "GPS track (GPX, FIT, NMEA, CSV)",
+                            &["gpx", "fit", "nmea", "gga", "csv"],
+                        )
+                        .pick_file()
+                    {
+                        let _ = tx.send(Picked::GpsTrack(source, p));
+                    }
+                });
+            }
             Command::Run => self.worker.send(Request::Run),
             Command::Pause => self.worker.send(Request::Pause),
             Command::Step => self.worker.send(Request::Step),
@@ -495,6 +529,7 @@ impl GyropathApp {
             Command::DismissError => {
                 self.error = None;
                 self.retry.clear();
+                self.track_for = None;
             }
             Command::Diagnose => {
                 self.diagnosing = Some("starting".into());

@@ -124,6 +124,7 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
         ui.label(format!("distance: {}", ride.distance));
     }
     wheel_ui(ui, path, options, commands);
+    gps_track_ui(ui, path, options, commands);
     if let Some((start, end)) = options.between {
         ui.horizontal(|ui| {
             ui.label(format!("rows from {start:.2} to {end:.2} s of the log"));
@@ -172,6 +173,47 @@ fn wheel_ui(
                 .clicked()
             {
                 commands.push(Command::PickWheel);
+            }
+        }
+    });
+}
+
+/// The fixes of a GPS track of the same ride (`--gps-track`): the track
+/// in use, or a button to pick one (replacing the log's own fixes).
+fn gps_track_ui(
+    ui: &mut egui::Ui,
+    path: &std::path::Path,
+    options: &ImportOptions,
+    commands: &mut Vec<Command>,
+) {
+    ui.horizontal(|ui| match &options.gps_track {
+        Some(track) => {
+            ui.label(format!(
+                "GPS: {}",
+                track
+                    .file_name()
+                    .map_or_else(|| track.display().to_string(), |n| n.to_string_lossy().into_owned())
+            ));
+            if ui
+                .button("Remove")
+                .on_hover_text("Take the fixes from the log itself again")
+                .clicked()
+            {
+                commands.push(reload(path, options, |o| o.gps_track = None));
+            }
+        }
+        None => {
+            if ui
+                .button("GPS track...")
+                .on_hover_text(
+                    "The fixes of a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA) in place of the log's own, matched by UTC or by the vehicle's turns",
+                )
+                .clicked()
+            {
+                commands.push(Command::PickGpsTrack(RideSource::Path(
+                    path.to_path_buf(),
+                    Box::new(options.clone()),
+                )));
             }
         }
     });

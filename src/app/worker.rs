@@ -75,6 +75,18 @@ impl RideSource {
         options.distance = crate::import::DistanceChoice::Auto;
         Some(Self::Path(path.clone(), options))
     }
+
+    /// The same file read again with the fixes of a GPS track of the same
+    /// ride (`--gps-track`), or with its own (`None`); `None` for bytes in
+    /// memory.
+    pub fn with_gps_track(&self, track: Option<PathBuf>) -> Option<Self> {
+        let Self::Path(path, options) = self else {
+            return None;
+        };
+        let mut options = options.clone();
+        options.gps_track = track;
+        Some(Self::Path(path.clone(), options))
+    }
 }
 
 /// What the worker can export.
@@ -206,10 +218,12 @@ pub enum Update {
     Loaded(Box<RideView>),
     /// The ride could not be loaded; the previous one (if any) stays.
     /// `retry`: the same file read otherwise, each with a button's label
-    /// (either side of a pause that refused it).
+    /// (either side of a pause that refused it); `track_for`: the same file,
+    /// to read again with a GPS track the user picks (a log without fixes).
     LoadFailed {
         message: String,
         retry: Vec<(String, RideSource)>,
+        track_for: Option<RideSource>,
     },
     Snapshot(Box<Snapshot>),
     Running(bool),
@@ -462,9 +476,14 @@ impl Worker {
                             .collect()
                     })
                     .unwrap_or_default();
+                let track_for = match &source {
+                    RideSource::Path(..) if e.needs_fixes() => Some(source.clone()),
+                    _ => None,
+                };
                 self.send(Update::LoadFailed {
                     message: e.to_string(),
                     retry,
+                    track_for,
                 });
                 return;
             }

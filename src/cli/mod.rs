@@ -146,6 +146,12 @@ pub struct SourceArgs {
     /// the time the FIT covers.
     #[arg(long)]
     pub wheel: Option<PathBuf>,
+    /// A GPS track of the same ride (a watch's or bike computer's GPX or FIT,
+    /// a phone's NMEA, a t_s,lat_deg,lon_deg CSV) whose points are the
+    /// ride's fixes: for a camera, phone or robot log without GPS. Matched by
+    /// UTC, or by the vehicle's turns where the log has no UTC start.
+    #[arg(long, value_name = "FILE")]
+    pub gps_track: Option<PathBuf>,
     /// Fit only the part of the log between two times, START,END (s, on the
     /// log's own clock, as `t_s`): one side of a pause, say.
     #[arg(long, value_name = "START,END")]
@@ -190,6 +196,7 @@ impl SourceArgs {
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--distance: {e}"))?,
             wheel: self.wheel.clone(),
+            gps_track: self.gps_track.clone(),
             between: self.between.as_deref().map(parse_between).transpose()?,
         })
     }

@@ -13,6 +13,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use thiserror::Error;
 
+use crate::rotation::wrap_pi;
 use crate::signals::Signals;
 
 /// Why no start could be found: the ride does not determine a heading.
@@ -55,11 +56,6 @@ const SLOW_CHORD_M: f64 = 5.0;
 /// ...within this long (s).
 const SLOW_CHORD_MAX_S: f64 = 20.0;
 
-fn wrap(a: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    a - two_pi * ((a + std::f64::consts::PI) / two_pi).floor()
-}
-
 impl StartGuess {
     pub fn from_signals(sig: &Signals) -> Result<Self, StartError> {
         let n = sig.len();
@@ -73,7 +69,7 @@ impl StartGuess {
             q *= UnitQuaternion::from_scaled_axis((sig.gyro[j] - rate_bias) * sig.dt[j]);
             let f = q * Vector3::x();
             let h = f.y.atan2(f.x);
-            unwrapped += wrap(h - last);
+            unwrapped += wrap_pi(h - last);
             last = h;
             psi[j] = unwrapped;
         }
@@ -190,7 +186,7 @@ impl StartGuess {
         // Refine by weighted least squares on the unwrapped residuals within 3 MAD.
         let resid: Vec<f64> = samples
             .iter()
-            .map(|&(t, d, _)| wrap(d - offset0 - slope0 * t))
+            .map(|&(t, d, _)| wrap_pi(d - offset0 - slope0 * t))
             .collect();
         let mut abs: Vec<f64> = resid.iter().map(|r| r.abs()).collect();
         let mad = crate::statistics::median(&mut abs).max(0.01);

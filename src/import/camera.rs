@@ -93,7 +93,9 @@ fn unfinished_mp4(path: &Path) -> Option<String> {
 
 /// Read a camera file as a ride log; a GoPro recording's first chapter
 /// with the chapters that follow it beside it ([`super::chapters`]), as one.
-pub fn read(path: &Path) -> Result<RideLog, LoadError> {
+/// A recording without a fix is an error where it `needs_fixes`, not where
+/// its fixes come from another device's track (`--gps-track`).
+pub fn read(path: &Path, needs_fixes: bool) -> Result<RideLog, LoadError> {
     let mut log = read_file(path)?;
     let file = log.source.clone();
     let mut following = super::chapters::following(path);
@@ -136,10 +138,10 @@ pub fn read(path: &Path) -> Result<RideLog, LoadError> {
             first.display()
         ));
     }
-    if log.fix_count() == 0 {
-        return Err(LoadError::File {
+    if needs_fixes && log.fix_count() == 0 {
+        return Err(LoadError::NoFix {
             file,
-            message: "the recording has no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix): a path needs GNSS fixes".into(),
+            message: "the recording has no GNSS fix while the gyro runs (this camera logs no GPS, or it had no fix): a path needs GNSS fixes; a GPS track of the same ride (a watch's or bike computer's GPX or FIT) gives them: --gps-track FILE".into(),
         });
     }
     Ok(log)

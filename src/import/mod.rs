@@ -22,6 +22,7 @@ mod csv_rows;
 pub mod dataflash;
 pub mod fit;
 pub mod gnsslogger;
+pub mod gps_track;
 pub mod mapped_csv;
 pub mod mount;
 pub mod npy;
@@ -83,6 +84,10 @@ pub enum LoadError {
     },
     #[error("{file}: {message}")]
     File { file: String, message: String },
+    /// A recording without a single GNSS fix (a camera that logs no GPS):
+    /// a GPS track of the same ride can give it its fixes (`--gps-track`).
+    #[error("{file}: {message}")]
+    NoFix { file: String, message: String },
     /// A bag's record or message that cannot be decoded.
     #[error("{file}: topic '{topic}': {message}")]
     Topic {
@@ -187,6 +192,10 @@ pub struct ImportOptions {
     /// A Garmin FIT activity whose distance (its wheel-speed sensor's)
     /// becomes the ride's odometer, matched by UTC ([`fit::merge_distance`]).
     pub wheel: Option<PathBuf>,
+    /// A GPS track of the same ride (GPX, FIT, NMEA, `t_s,lat_deg,lon_deg`
+    /// CSV) whose points become the ride's fixes ([`gps_track::merge_track`]):
+    /// for a camera, phone or robot log without GPS.
+    pub gps_track: Option<PathBuf>,
     /// Keep only the rows from the first to the second time (s, on the
     /// log's own clock): a part of a ride, such as one side of a pause the
     /// gyro cannot be integrated across.
@@ -406,10 +415,13 @@ pub fn open(path: &Path, options: &ImportOptions) -> Result<Imported, LoadError>
             None,
         ),
         SourceKind::Ulog => (ulog::read(path)?, None),
-        SourceKind::Camera => (camera::read(path)?, None),
+        SourceKind::Camera => (camera::read(path, options.gps_track.is_none())?, None),
         SourceKind::GnssLogger => (gnsslogger::read(path)?, None),
         SourceKind::DataFlash => (dataflash::read(path)?, None),
     };
+    if let Some(track) = &options.gps_track {
+        gps_track::merge_track(&mut log, track)?;
+    }
     if let Some(wheel) = &options.wheel {
         if options.distance == DistanceChoice::Gnss {
             return Err(LoadError::File {
