@@ -412,62 +412,79 @@ fn verticals(log: &RideLog) -> Vec<(Vector3<f64>, String)> {
     vec![(axis, name(1.0)), (-axis, name(-1.0))]
 }
 
-/// The gyro's turn about `up` from the log's start to each row (rad):
-/// `Y_j = sum_{i <= j} (w_i . u) (t_i - t_{i-1})`, a row holding the mean
-/// rate since the one before.
-fn cumulative_turn(log: &RideLog, up: &Vector3<f64>) -> Vec<f64> {
-    let mut y = Vec::with_capacity(log.len());
-    let mut sum = 0.0;
-    for (j, w) in log.gyro_dps.iter().enumerate() {
-        if j > 0 {
-            sum += Vector3::from(*w).dot(up).to_radians() * (log.t_s[j] - log.t_s[j - 1]);
+/// The gyro's turn about a vertical `u` since the log's start (rad),
+/// `Y(t) = sum_{t_j <= t} (w_j . u) (t_j - t_{j-1})` (a row holds the mean
+/// rate since the one before), sampled every [`GRID_S`] so that the search
+/// reads it at any time in O(1), whatever the log's rate.
+struct Turned {
+    start: f64,
+    end: f64,
+    y: Vec<f64>,
+}
+
+/// Step (s) of [`Turned`]'s samples: linear between them, the turn's
+/// integral is exact to a fraction of a degree at any gyro rate.
+const GRID_S: f64 = 0.02;
+
+impl Turned {
+    fn new(log: &RideLog, up: &Vector3<f64>) -> Self {
+        let (start, end) = (log.t_s[0], log.t_s[log.len() - 1]);
+        let n = ((end - start) / GRID_S).ceil() as usize + 1;
+        let mut y = Vec::with_capacity(n);
+        let (mut j, mut sum) = (0, 0.0);
+        for k in 0..n {
+            let t = start + k as f64 * GRID_S;
+            // Whole rows up to t, then the part of the next row's step
+            // before t at its mean rate.
+            while j + 1 < log.len() && log.t_s[j + 1] <= t {
+                j += 1;
+                sum += Vector3::from(log.gyro_dps[j]).dot(up).to_radians()
+                    * (log.t_s[j] - log.t_s[j - 1]);
+            }
+            let part = if j + 1 < log.len() {
+                Vector3::from(log.gyro_dps[j + 1]).dot(up).to_radians() * (t - log.t_s[j]).max(0.0)
+            } else {
+                0.0
+            };
+            y.push(sum + part);
         }
-        y.push(sum);
+        Self { start, end, y }
     }
-    y
+
+    fn at(&self, t: f64) -> f64 {
+        let u = ((t - self.start) / GRID_S).clamp(0.0, (self.y.len() - 1) as f64);
+        let k = (u as usize).min(self.y.len().saturating_sub(2));
+        match self.y.get(k + 1) {
+            Some(&next) => self.y[k] + (next - self.y[k]) * (u - k as f64),
+            None => self.y[k],
+        }
+    }
 }
 
-/// Linear interpolation of `y` (at increasing `t`) at `x`, from a row index
-/// `at` that only moves forward between calls with increasing `x`.
-fn interpolate(t: &[f64], y: &[f64], x: f64, at: &mut usize) -> f64 {
-    while *at + 2 < t.len() && t[*at + 1] < x {
-        *at += 1;
-    }
-    let (a, b) = (*at, (*at + 1).min(t.len() - 1));
-    if b == a || t[b] <= t[a] {
-        return y[a];
-    }
-    y[a] + (y[b] - y[a]) * ((x - t[a]) / (t[b] - t[a])).clamp(0.0, 1.0)
-}
-
-/// The correlation of the gyro's turns (`y` at the log's times `t`) with
-/// the track's `turns` at `offset` (every `stride`-th interval), with the
-/// intervals compared and the track's turning over them.
+/// The correlation of the gyro's turns with the track's `turns` at
+/// `offset` (every `stride`-th interval), with the intervals compared and
+/// the track's turning over them.
 fn correlation(
-    t: &[f64],
-    y: &[f64],
+    gyro: &Turned,
     turns: &[(f64, f64, f64)],
     offset: f64,
     stride: usize,
 ) -> (f64, usize, f64) {
-    let (first, last) = (t[0] + offset, t[t.len() - 1] + offset);
+    let (first, last) = (gyro.start + offset, gyro.end + offset);
     let from = turns.partition_point(|&(a, _, _)| a < first);
-    let mut at = 0;
     let (mut n, mut sx, mut sy, mut sxx, mut syy, mut sxy, mut turning) =
         (0usize, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for &(a, b, track) in turns[from..].iter().step_by(stride.max(1)) {
         if b > last {
             break;
         }
-        let start = interpolate(t, y, a - offset, &mut at);
-        let gyro =
-            (interpolate(t, y, b - offset, &mut at) - start).clamp(-MAX_TURN_RAD, MAX_TURN_RAD);
+        let turned = (gyro.at(b - offset) - gyro.at(a - offset)).clamp(-MAX_TURN_RAD, MAX_TURN_RAD);
         n += 1;
-        sx += gyro;
+        sx += turned;
         sy += track;
-        sxx += gyro * gyro;
+        sxx += turned * turned;
         syy += track * track;
-        sxy += gyro * track;
+        sxy += turned * track;
         turning += track.abs();
     }
     if n < 3 {
@@ -515,14 +532,14 @@ pub fn turn_clock(log: &RideLog, track: &ReferenceTrack) -> Result<TurnClock, St
     let stride = ((steps as f64 * ride_intervals / MAX_COARSE_PAIRS).ceil() as usize).max(1);
     let mut best: Option<(f64, f64)> = None;
     let mut vertical = String::new();
-    let mut best_y = Vec::new();
+    let mut best_turned = None;
     let mut coarse = Vec::new();
     for (up, name) in verticals(log) {
-        let y = cumulative_turn(log, &up);
+        let turned = Turned::new(log, &up);
         let scores: Vec<(f64, f64)> = (0..steps)
             .map(|s| {
                 let c = lo + s as f64 * COARSE_STEP_S;
-                let (r, n, turning) = correlation(&log.t_s, &y, &turns, c, stride);
+                let (r, n, turning) = correlation(&turned, &turns, c, stride);
                 let ok = n * stride >= MIN_INTERVALS && turning * stride as f64 >= MIN_TURNING_RAD;
                 (c, if ok { r } else { f64::NEG_INFINITY })
             })
@@ -532,11 +549,13 @@ pub fn turn_clock(log: &RideLog, track: &ReferenceTrack) -> Result<TurnClock, St
         {
             best = Some((c, r));
             vertical = name;
-            best_y = y;
+            best_turned = Some(turned);
             coarse = scores;
         }
     }
-    let Some((coarse_c, coarse_r)) = best.filter(|(_, r)| r.is_finite()) else {
+    let (Some((coarse_c, coarse_r)), Some(turned)) =
+        (best.filter(|(_, r)| r.is_finite()), best_turned)
+    else {
         return Err(format!(
             "the track and the ride share too little turning (at least {MIN_INTERVALS} intervals and {:.0} deg of turns are needed)",
             MIN_TURNING_RAD.to_degrees()
@@ -552,7 +571,7 @@ pub fn turn_clock(log: &RideLog, track: &ReferenceTrack) -> Result<TurnClock, St
     let (offset, (correlation_at, intervals, _)) = (0..=fine_steps)
         .map(|s| {
             let c = coarse_c - FINE_SPAN_S + s as f64 * FINE_STEP_S;
-            (c, correlation(&log.t_s, &best_y, &turns, c, 1))
+            (c, correlation(&turned, &turns, c, 1))
         })
         .max_by(|a, b| a.1.0.total_cmp(&b.1.0))
         .unwrap_or((coarse_c, (coarse_r, 0, 0.0)));
@@ -727,6 +746,31 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("same ride"), "{e}");
+    }
+
+    #[test]
+    fn the_turn_is_read_between_rows_at_their_mean_rates() {
+        // 3 rows at 0, 0.3 and 1.0 s: 10 deg/s, then 20 deg/s.
+        let log = RideLog {
+            t_s: vec![0.0, 0.3, 1.0],
+            gyro_dps: vec![[0.0, 0.0, 0.0], [0.0, 0.0, 10.0], [0.0, 0.0, 20.0]],
+            ..RideLog::default()
+        };
+        let turned = Turned::new(&log, &Vector3::z());
+        for (t, deg) in [
+            (0.0, 0.0),
+            (0.15, 1.5),
+            (0.3, 3.0),
+            (0.65, 10.0),
+            (1.0, 17.0),
+            (2.0, 17.0),
+        ] {
+            assert!(
+                (turned.at(t).to_degrees() - deg).abs() < 1e-9,
+                "{t}: {}",
+                turned.at(t).to_degrees()
+            );
+        }
     }
 
     #[test]
