@@ -87,6 +87,28 @@ const RIVAL_S: f64 = 20.0;
 const MIN_INTERVALS: usize = 30;
 const MIN_TURNING_RAD: f64 = std::f64::consts::FRAC_PI_2;
 
+/// A clock that puts the track further (s) from where the turns put it is
+/// said to be off.
+const CLOCKS_AGREE_S: f64 = 1.0;
+
+/// A time difference as a reader takes it in: seconds, or hours, minutes
+/// and seconds.
+fn duration(s: f64) -> String {
+    let sign = if s < 0.0 { "-" } else { "+" };
+    let a = s.abs();
+    if a < 120.0 {
+        format!("{sign}{a:.1} s")
+    } else {
+        let whole = a.round() as u64;
+        format!(
+            "{sign}{} h {:02} min {:02} s",
+            whole / 3600,
+            whole / 60 % 60,
+            whole % 60
+        )
+    }
+}
+
 /// Where a track falls on a ride's clock, found from the turns.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TurnClock {
@@ -139,7 +161,42 @@ fn merge(log: &mut RideLog, track: ReferenceTrack, file: &str) -> Result<(), Loa
             Clock::Boot => "by the ride's boot-clock start".to_string(),
             _ => "by UTC".to_string(),
         };
-        (track.on_ride_clock(t0_unix, t0_boot, &log.source)?, how)
+        // The turns' own placement, where they can tell one, checks the two
+        // clocks against each other: a camera's clock in local time, a
+        // logger's drifted clock.
+        let turns = (clock != Clock::Ride)
+            .then(|| turn_clock(log, &track).ok())
+            .flatten();
+        let raw_first = track.t_s[0];
+        let track = track.on_ride_clock(t0_unix, t0_boot, &log.source)?;
+        let by_clock = raw_first - track.t_s[0];
+        let (first, last) = (track.t_s[0], track.t_s[track.t_s.len() - 1]);
+        if let Some(turns) = turns.filter(|t| (t.offset_s - by_clock).abs() > CLOCKS_AGREE_S) {
+            let apart = turns.offset_s - by_clock;
+            let (name, start) = if clock == Clock::Boot {
+                ("t0_boot_s", t0_boot)
+            } else {
+                ("t0_unix_s", t0_unix)
+            };
+            let shared = last.min(ride_last) - first.max(ride_first);
+            let what = format!(
+                "the vehicle's turns put {file} {} from where the ride's start puts it (correlation {:.2}): one of the two clocks is off (a camera's local time, a time zone, a drifted clock)",
+                duration(apart),
+                turns.correlation
+            );
+            if shared < MIN_OVERLAP_S {
+                return Err(error(format!(
+                    "{what}; placed by the ride's start, the two share {:.0} s. If the turns are right, the ride's start is {name} {:.3} ('# {name}:' in the log)",
+                    shared.max(0.0),
+                    start.map_or(turns.offset_s, |t0| t0 + apart)
+                )));
+            }
+            log.warnings.push(format!(
+                "{}: {what}; the fixes are placed by the ride's start as given",
+                log.source
+            ));
+        }
+        (track, how)
     } else {
         let turns = turn_clock(log, &track).map_err(|why| {
             error(format!(
@@ -706,6 +763,33 @@ mod tests {
         merge(&mut dated, track.clone(), "watch.gpx").unwrap();
         assert_eq!(dated.t0_unix_s(), Some(t0 + 5.0));
         assert!(dated.warnings.iter().any(|w| w.contains("placed by UTC")));
+        // ... and the turns say that the clocks are 5 s apart.
+        assert!(
+            dated.warnings.iter().any(|w| ["-4.9 s", "-5.0 s", "-5.1 s"]
+                .iter()
+                .any(|d| w.contains(&format!("{d} from where the ride's start puts it")))),
+            "{:?}",
+            dated.warnings
+        );
+        // A ride's start in local time (an hour off): no time in common by
+        // the clock, and the error gives the start that the turns find.
+        let mut local = without_fixes(log.clone());
+        local
+            .metadata
+            .insert("t0_unix_s".into(), format!("{}", t0 + 3600.0));
+        let e = merge(&mut local, track.clone(), "watch.gpx")
+            .unwrap_err()
+            .to_string();
+        let start: f64 = e
+            .split("start is t0_unix_s ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{e}"));
+        assert!(
+            e.contains("-1 h 00 min 00 s") && (start - t0).abs() < 0.2,
+            "{e}"
+        );
         // The ride's clock puts the track 5 s early: its last 5 s are cut.
         let last = dated.t_s[dated.len() - 1];
         assert!((590.0..595.1).contains(&last), "{last}");
