@@ -56,6 +56,10 @@ const MIN_FIXES: usize = 10;
 /// differenced into a speed or course: a gap in the track.
 const MAX_POINT_GAP_S: f64 = 2.5;
 
+/// Least time (s) between the track points whose course changes are
+/// compared with the gyro's turns.
+const MIN_TURN_STEP_S: f64 = 0.9;
+
 /// Slowest speed (m/s) at which a track's course is read: below it a few
 /// metres of GPS noise turn the course at random.
 const MIN_COURSE_SPEED_MPS: f64 = 2.0;
@@ -312,6 +316,17 @@ fn merge(log: &mut RideLog, track: ReferenceTrack, file: &str) -> Result<(), Loa
             log.source
         )));
     }
+    if alt.is_none() {
+        log.warnings.push(format!(
+            "{}: {file} gives no heights: the path's heights are {}",
+            log.source,
+            if log.baro_alt_m.is_some() {
+                "the barometer's, from an unknown start"
+            } else {
+                "not measured"
+            }
+        ));
+    }
     log.gps_alt_m = alt;
     log.gps_speed_mps = Some(speed);
     log.metadata
@@ -389,23 +404,33 @@ fn mean_speed(track: &ReferenceTrack) -> f64 {
 /// over it, anticlockwise positive (rad).
 fn track_turns(track: &ReferenceTrack) -> Vec<(f64, f64, f64)> {
     let (_, en) = horizontal(track);
+    // A faster track (5-20 Hz) is read a point per second or so: between
+    // points a fifth of a second apart, a receiver's decimetres of noise
+    // are a chord's whole length.
+    let mut kept: Vec<usize> = Vec::with_capacity(en.len());
+    for k in 0..en.len() {
+        if kept
+            .last()
+            .is_none_or(|&j| track.t_s[k] - track.t_s[j] >= MIN_TURN_STEP_S)
+        {
+            kept.push(k);
+        }
+    }
+    let t: Vec<f64> = kept.iter().map(|&k| track.t_s[k]).collect();
+    let en: Vec<Vector3<f64>> = kept.iter().map(|&k| en[k]).collect();
     let course: Vec<Option<f64>> = (0..en.len())
         .map(|k| {
-            ground_velocity(&track.t_s, &en, k)
+            ground_velocity(&t, &en, k)
                 .filter(|v| v.norm() >= MIN_COURSE_SPEED_MPS)
                 .map(|v| v.x.atan2(v.y))
         })
         .collect();
     (0..en.len().saturating_sub(1))
-        .filter(|&k| track.t_s[k + 1] - track.t_s[k] <= MAX_POINT_GAP_S)
+        .filter(|&k| t[k + 1] - t[k] <= MAX_POINT_GAP_S)
         .filter_map(|k| {
             let (a, b) = (course[k]?, course[k + 1]?);
             let turn = -crate::rotation::wrap_pi(b - a);
-            Some((
-                track.t_s[k],
-                track.t_s[k + 1],
-                turn.clamp(-MAX_TURN_RAD, MAX_TURN_RAD),
-            ))
+            Some((t[k], t[k + 1], turn.clamp(-MAX_TURN_RAD, MAX_TURN_RAD)))
         })
         .collect()
 }
@@ -737,6 +762,48 @@ mod tests {
         );
         // The signals derive from it: a ride with fixes again.
         crate::signals::Signals::from_log(&bare).unwrap();
+    }
+
+    /// A 10 Hz track (a sports receiver's), half a metre of noise on each
+    /// point: read a point a second, it places the ride as well.
+    #[test]
+    fn a_fast_noisy_track_is_read_a_point_a_second() {
+        let sim = simulate(&SimConfig {
+            seed: 3,
+            duration_s: 600.0,
+            ..SimConfig::default()
+        })
+        .unwrap();
+        let truth = sim.reference("truth.csv").unwrap();
+        let t0 = 1_650_000_000.0;
+        let mut track = ReferenceTrack::empty("fast.gpx", Clock::Unix);
+        let mut state: u64 = 12_345;
+        let mut noise = || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 1.7e-5 // +-0.9 m in latitude
+        };
+        for (k, (&t, p)) in truth.t_s.iter().zip(&truth.points).enumerate() {
+            if k % 10 == 0 {
+                track.t_s.push(t0 + t);
+                track.points.push(Geodetic::new(
+                    p.lat_deg + noise(),
+                    p.lon_deg + noise(),
+                    f64::NAN,
+                ));
+            }
+        }
+        let mut bare = without_fixes(sim.log("ride.csv").unwrap());
+        merge(&mut bare, track, "fast.gpx").unwrap();
+        let found = bare.t0_unix_s().unwrap();
+        assert!(
+            (found - t0).abs() < 0.3,
+            "placed at {found}: {:?}",
+            bare.warnings
+        );
+        assert!(bare.warnings.iter().any(|w| w.contains("gives no heights")));
+        assert!(bare.gps_alt_m.is_none());
     }
 
     #[test]
