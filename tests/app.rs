@@ -915,9 +915,10 @@ fn a_ride_refused_for_a_pause_offers_each_side_of_it() {
 
 /// A log without GPS (the Berlin drive's rows with their fixes emptied and
 /// no start time) is refused with a "GPS track..." button; read with the
-/// drive's reference as a GPX in UTC (what a watch would have logged, the
-/// file the button's dialog picks), it loads with the fixes placed by the
-/// vehicle's turns, and the Source panel names the track.
+/// drive's reference as a GPX in UTC (what a watch would have logged),
+/// dropped on the window (or picked by the button's dialog), it loads with
+/// the fixes placed by the vehicle's turns, and the Source panel names the
+/// track.
 #[test]
 fn a_log_without_gps_offers_a_gps_track_and_loads_with_it() {
     let berlin = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -969,14 +970,11 @@ fn a_log_without_gps_offers_a_gps_track_and_loads_with_it() {
     let error = h.state().error.clone().expect("error");
     assert!(error.contains("no GPS fix"), "{error}");
     h.get_by_label("GPS track...");
-    let source = h
-        .state()
-        .track_for
-        .clone()
-        .expect("a source to read with a track");
-    let with_track = source.with_gps_track(Some(track)).expect("a file");
-    h.state_mut()
-        .apply(gyropath::app::Command::Open(with_track));
+    assert!(h.state().track_for.is_some());
+    // The track dropped on the window, as the button's dialog would pick it.
+    h.input_mut()
+        .dropped_files
+        .push(std::sync::Arc::new(Dropped(track)));
     assert!(
         step_until(&mut h, Duration::from_secs(60), |a| a
             .ride

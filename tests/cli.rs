@@ -1646,6 +1646,18 @@ fn a_gps_track_gives_a_log_without_gps_its_fixes_placed_by_the_turns() {
         .unwrap_or_else(|| panic!("{}", r["reference"]));
     assert!(rms < 2.0, "{rms} m: {stdout}");
 
+    // A batch would give every ride the same track: refused.
+    let out = gyropath(&[
+        "fit",
+        s(&ride_path),
+        s(&berlin.join("ride.csv")),
+        "--gps-track",
+        s(&watch_path),
+    ]);
+    assert!(!out.status.success());
+    let e = String::from_utf8_lossy(&out.stderr);
+    assert!(e.contains("gives one ride its fixes"), "{e}");
+
     // The city's own fixes, 20 m off: too noisy to read turns from,
     // refused with the way out.
     let out = gyropath(&[

@@ -9,8 +9,16 @@ impl GyropathApp {
         if let Some(f) = dropped.into_iter().next() {
             let path = f.path().to_path_buf();
             // A track without a gyro (a CSV of times and positions, GPX,
-            // FIT, NMEA) is a reference track of the ride already open.
-            if self.ride.is_some() && is_reference_track(&path) {
+            // FIT, NMEA) is the GPS track of a ride refused for having no
+            // fix, else a reference track of the ride already open.
+            let track_for = self
+                .track_for
+                .as_ref()
+                .filter(|_| is_reference_track(&path))
+                .and_then(|source| source.with_gps_track(Some(path.clone())));
+            if let Some(source) = track_for {
+                commands.push(Command::Open(source));
+            } else if self.ride.is_some() && is_reference_track(&path) {
                 commands.push(Command::OpenReference(path));
             } else {
                 commands.push(Command::Open(RideSource::file(path)));
@@ -109,7 +117,7 @@ impl GyropathApp {
                 if let Some(source) = &self.track_for
                     && ui
                         .button("GPS track...")
-                        .on_hover_text("The fixes of a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA), matched by UTC or by the vehicle's turns")
+                        .on_hover_text("The fixes of a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA), matched by UTC or by the vehicle's turns; or drop the track on the window")
                         .clicked()
                 {
                     commands.push(Command::PickGpsTrack(source.clone()));

@@ -224,6 +224,13 @@ pub(super) fn fit_batch(args: &FitArgs) -> Result<()> {
     }
     let settings = args.settings_with_model()?;
     let rides = collect_rides(&args.rides, args.reference.as_deref(), out_dir)?;
+    if let (Some(track), true) = (&args.source.gps_track, rides.len() > 1) {
+        anyhow::bail!(
+            "--gps-track {} gives one ride its fixes, and this batch has {} rides: fit each ride with its own track",
+            track.display(),
+            rides.len()
+        );
+    }
     let stems = output_stems(&rides)?;
     let started = Instant::now();
     let rows: Vec<BatchRow> = rides
