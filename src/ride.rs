@@ -119,6 +119,24 @@ impl RideLog {
         }
     }
 
+    /// Keep only the rows from `start` to `end` (s, the log's clock), the
+    /// time that a second source (`what`) covers, with a warning saying so
+    /// where rows are left out.
+    pub fn cut_to(&mut self, start: f64, end: f64, what: &str) {
+        let rows =
+            self.t_s.partition_point(|&t| t < start)..self.t_s.partition_point(|&t| t <= end);
+        if rows.len() < self.len() {
+            let span =
+                self.t_s.last().copied().unwrap_or(0.0) - self.t_s.first().copied().unwrap_or(0.0);
+            self.warnings.push(format!(
+                "{}: {what} covers {:.0} s of the ride's {span:.0} s: the ride is cut to {start:.1}-{end:.1} s",
+                self.source,
+                end - start,
+            ));
+            self.keep_rows(rows);
+        }
+    }
+
     /// `other`'s rows after this log's (their times already on its clock,
     /// later than its last): a column that only one of them has is empty
     /// (or, for wheel pulses, low) on the other's rows; channels are joined

@@ -274,16 +274,7 @@ fn merge_activity(log: &mut RideLog, activity: &Activity, file: &str) -> Result<
         )));
     }
     log.warnings.extend(activity.track.warnings.iter().cloned());
-    let rows = log.t_s.partition_point(|&t| t < start)..log.t_s.partition_point(|&t| t <= end);
-    if rows.len() < log.len() {
-        log.warnings.push(format!(
-            "{}: {file}'s distance covers {:.0} s of the ride's {:.0} s: the ride is cut to {start:.1}-{end:.1} s",
-            log.source,
-            end - start,
-            ride_last - ride_first
-        ));
-        log.keep_rows(rows);
-    }
+    log.cut_to(start, end, &format!("{file}'s distance"));
     let mut k = 0;
     let distance = log
         .t_s

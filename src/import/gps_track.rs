@@ -246,16 +246,7 @@ fn merge(log: &mut RideLog, track: ReferenceTrack, file: &str) -> Result<(), Loa
             (end - start).max(0.0)
         )));
     }
-    let rows = log.t_s.partition_point(|&t| t < start)..log.t_s.partition_point(|&t| t <= end);
-    if rows.len() < log.len() {
-        log.warnings.push(format!(
-            "{}: {file} covers {:.0} s of the ride's {:.0} s: the ride is cut to {start:.1}-{end:.1} s",
-            log.source,
-            end - start,
-            ride_last - ride_first
-        ));
-        log.keep_rows(rows);
-    }
+    log.cut_to(start, end, file);
     let replaced = log.fix_count();
     if replaced > 0 {
         log.warnings.push(format!(
