@@ -891,6 +891,21 @@ mod tests {
     }
 
     #[test]
+    fn the_checks_say_a_log_without_fixes_needs_a_track() {
+        let (log, _) = ride_and_track(3, 0.0);
+        let bare = without_fixes(log.clone());
+        let said = |log: &RideLog| {
+            crate::import::checks::check(log).verdicts.iter().any(|v| {
+                v.subject == "GPS"
+                    && v.level == crate::import::Level::Problem
+                    && v.message.contains("--gps-track")
+            })
+        };
+        assert!(said(&bare));
+        assert!(!said(&log));
+    }
+
+    #[test]
     fn the_turn_is_read_between_rows_at_their_mean_rates() {
         // 3 rows at 0, 0.3 and 1.0 s: 10 deg/s, then 20 deg/s.
         let log = RideLog {

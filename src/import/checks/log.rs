@@ -39,6 +39,13 @@ pub(super) fn sample_rate(log: &RideLog, report: &mut CheckReport) -> bool {
     if let Some((pause, _)) = crate::signals::pause(&log.t_s, &log.line) {
         report.say("pause", Level::Problem, pause);
     }
+    if log.fix_count() == 0 {
+        report.say(
+            "GPS",
+            Level::Problem,
+            "no fix in the whole log: a path needs GNSS fixes; a GPS track of the same ride (a watch's or bike computer's GPX or FIT, a phone's NMEA) gives them: --gps-track FILE".into(),
+        );
+    }
     rate >= crate::signals::MIN_GYRO_RATE_HZ
 }
 
