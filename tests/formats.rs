@@ -30,7 +30,10 @@ fn gnss_only_files_say_what_they_are_and_that_a_path_needs_a_gyro() {
         e.contains("no gyro") && e.contains("A path needs a gyro"),
         "{e}"
     );
-    assert!(e.contains("--reference"), "{e}");
+    assert!(
+        e.contains("--reference") && e.contains("--gps-track"),
+        "{e}"
+    );
 
     let nmea = formats().join("nmea/MTV.Local1.ublox-F9K.20200206-181434.nmea");
     let e = open_err(&nmea);
@@ -503,6 +506,65 @@ fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
         .expect_err("no t0_unix_s")
         .to_string();
     assert!(e.contains("t0_unix_s"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A camera without GPS and without a clock, on the bike of the Edge 810's
+/// ride: the bike computer's FIT gives it both its fixes (`--gps-track`,
+/// placed by the turns, which also gives the ride its UTC start) and then
+/// its wheel distance (`--wheel`, matched by that start).
+#[test]
+fn a_fit_activity_is_both_the_gps_track_and_the_wheel_of_a_camera_without_either() {
+    use gyropath::optimisation::{FitSettings, Reconstruction};
+    let path = formats().join("fit/Edge810-Vector-2013-08-16-15-35-10.fit");
+    let fit = gyropath::import::fit::parse(&std::fs::read(&path).expect("read"), "edge.fit")
+        .expect("fit");
+    let dir = std::env::temp_dir().join(format!("gyropath-track-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let ride = dir.join("camera.csv");
+    // No start time, and no fix or GNSS speed on any row.
+    let text: Vec<String> = common::ride_along(&fit, 1200.0, 1500.0, 0.0)
+        .lines()
+        .skip(1)
+        .map(|line| {
+            let f: Vec<&str> = line.split(',').collect();
+            if f[0] == "t_s" {
+                line.to_string()
+            } else {
+                format!("{},{},{},{},,,", f[0], f[1], f[2], f[3])
+            }
+        })
+        .collect();
+    std::fs::write(&ride, text.join("\n")).expect("write");
+    let options = ImportOptions {
+        gps_track: Some(path.clone()),
+        wheel: Some(path.clone()),
+        ..ImportOptions::default()
+    };
+    let im = gyropath::pipeline::open(&ride, &options).expect("open with the track and the wheel");
+    let log = &im.log;
+    let t0 = log.t0_unix_s().expect("a start found");
+    let truly = fit.track.t_s[0] + 1200.0;
+    assert!(
+        (t0 - truly).abs() < 0.5,
+        "{t0} against {truly}: {:?}",
+        log.warnings
+    );
+    assert!(log.fix_count() > 250 && log.odo_m.is_some());
+    let sig = std::sync::Arc::new(gyropath::signals::Signals::from_log(log).expect("signals"));
+    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    rec.finish();
+    let gain = rec
+        .model()
+        .effect_params(rec.params(), "odometer_gain")
+        .expect("gain")[0];
+    let rms = rec.stats().rms_horizontal_m;
+    println!(
+        "Edge 810 as track and wheel: start {:+.2} s, gain {gain:.4}, path {rms:.2} m from the fixes",
+        t0 - truly
+    );
+    assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
+    assert!(rms < 5.0, "{rms} m from the fixes");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

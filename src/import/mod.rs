@@ -344,8 +344,9 @@ fn gnss_only(path: &Path) -> Option<String> {
         let bytes = std::fs::read(path).ok()?;
         return Some(match fit::parse(&bytes, &path.display().to_string()) {
             Ok(a) => format!(
-                "{}: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track)",
+                "{}: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track), or the fixes of a gyro log without GPS (--gps-track {})",
                 a.describe(),
+                path.display(),
                 path.display()
             ),
             Err(e) => format!(
@@ -371,9 +372,10 @@ fn gnss_only(path: &Path) -> Option<String> {
         .map(|bytes| (what, parse(&bytes, &path.display().to_string())));
     track.map(|(what, read)| match read {
         Ok(r) => format!(
-            "{what} of {} points over {:.0} s: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track)",
+            "{what} of {} points over {:.0} s: GNSS only, no gyro; it can be the reference track of a ride that has one (--reference {}, File > Open reference track), or the fixes of a gyro log without GPS (--gps-track {})",
             r.t_s.len(),
             r.t_s.last().zip(r.t_s.first()).map_or(0.0, |(l, f)| l - f),
+            path.display(),
             path.display()
         ),
         Err(e) => format!("{what}: GNSS only, no gyro, and not readable as a reference track either: {e}"),

@@ -273,7 +273,7 @@ impl Columns {
             return Err(field_err(
                 "gx_dps",
                 format!(
-                    "a track of positions without a gyro (t_s, lat_deg, lon_deg): it can be the reference track of a ride that has one (--reference {file}, File > Open reference track); a ride log needs the gyro columns gx_dps, gy_dps, gz_dps"
+                    "a track of positions without a gyro (t_s, lat_deg, lon_deg): it can be the reference track of a ride that has one (--reference {file}, File > Open reference track), or the fixes of a gyro log without GPS (--gps-track {file}); a ride log needs the gyro columns gx_dps, gy_dps, gz_dps"
                 ),
             ));
         }
