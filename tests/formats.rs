@@ -432,7 +432,6 @@ fn a_damaged_camera_file_is_an_error_naming_it() {
 /// one from another day, is a clear error naming the FIT.
 #[test]
 fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
-    use gyropath::optimisation::{FitSettings, Reconstruction};
     let path = formats().join("fit/Edge810-Vector-2013-08-16-15-35-10.fit");
     let fit = gyropath::import::fit::parse(&std::fs::read(&path).expect("read"), "edge.fit")
         .expect("fit");
@@ -471,13 +470,7 @@ fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
         said.contains("wheel-speed sensor") && said.contains("Edge810"),
         "{said}"
     );
-    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
-    rec.finish();
-    let gain = rec
-        .model()
-        .effect_params(rec.params(), "odometer_gain")
-        .expect("gain")[0];
-    let rms = rec.stats().rms_horizontal_m;
+    let (gain, rms) = gain_and_rms(sig);
     println!("Edge 810, 5 minutes: gain {gain:.4}, path {rms:.2} m from the fixes");
     assert!((gain - 1.0).abs() < 0.03, "gain {gain}");
     assert!(rms < 5.0, "{rms} m from the fixes");
@@ -509,13 +502,25 @@ fn a_fit_wheel_distance_is_the_odometer_of_a_ride_matched_by_utc() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A default fit of `sig`: its odometer gain and its path's horizontal RMS
+/// from the fixes (m).
+fn gain_and_rms(sig: std::sync::Arc<gyropath::signals::Signals>) -> (f64, f64) {
+    use gyropath::optimisation::{FitSettings, Reconstruction};
+    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
+    rec.finish();
+    let gain = rec
+        .model()
+        .effect_params(rec.params(), "odometer_gain")
+        .expect("gain")[0];
+    (gain, rec.stats().rms_horizontal_m)
+}
+
 /// A camera without GPS and without a clock, on the bike of the Edge 810's
 /// ride: the bike computer's FIT gives it both its fixes (`--gps-track`,
 /// placed by the turns, which also gives the ride its UTC start) and then
 /// its wheel distance (`--wheel`, matched by that start).
 #[test]
 fn a_fit_activity_is_both_the_gps_track_and_the_wheel_of_a_camera_without_either() {
-    use gyropath::optimisation::{FitSettings, Reconstruction};
     let path = formats().join("fit/Edge810-Vector-2013-08-16-15-35-10.fit");
     let fit = gyropath::import::fit::parse(&std::fs::read(&path).expect("read"), "edge.fit")
         .expect("fit");
@@ -551,14 +556,9 @@ fn a_fit_activity_is_both_the_gps_track_and_the_wheel_of_a_camera_without_either
         log.warnings
     );
     assert!(log.fix_count() > 250 && log.odo_m.is_some());
-    let sig = std::sync::Arc::new(gyropath::signals::Signals::from_log(log).expect("signals"));
-    let mut rec = Reconstruction::new(sig, FitSettings::default()).expect("fit");
-    rec.finish();
-    let gain = rec
-        .model()
-        .effect_params(rec.params(), "odometer_gain")
-        .expect("gain")[0];
-    let rms = rec.stats().rms_horizontal_m;
+    let (gain, rms) = gain_and_rms(std::sync::Arc::new(
+        gyropath::signals::Signals::from_log(log).expect("signals"),
+    ));
     println!(
         "Edge 810 as track and wheel: start {:+.2} s, gain {gain:.4}, path {rms:.2} m from the fixes",
         t0 - truly
