@@ -10,7 +10,7 @@
 //!
 //! | quantity | limit | why |
 //! | --- | --- | --- |
-//! | odometer gain | 0.7 .. 1.3 | a wrong circumference or a CAN scale is off by a few percent; beyond 30 % the units are wrong (km/h as m/s is 3.6), negative the sign or the forward axis |
+//! | odometer gain | 0.7 .. 1.3 | a wrong circumference or a CAN scale is off by a few percent; beyond 30 % the units are wrong (km/h as m/s is 3.6, feet as metres 3.28, knots 1.94; see `distance_units`), negative the sign or the forward axis |
 //! | start tilt of the sensor | 30 deg | a sensor is mounted near upright (the fit's own prior is 10 deg); more means the vertical axis is not z, or the roll and pitch rates do not describe the vehicle |
 //! | mounting misalignment | 20 deg | a bracket is a few degrees off; 90 or 180 is a swapped or flipped axis |
 //! | gyro scale error | 20 % | MEMS scale errors are a few percent; 57x or 1/57 is rad/s against deg/s |
@@ -116,6 +116,51 @@ pub fn path_far_from_fixes(model: &Model, path: &impl PathAt) -> Option<Violatio
     })
 }
 
+/// What a factor `g` between the log's distance and the true one says
+/// about the log's units (`g`: metres per logged unit, the fit's odometer
+/// gain, or the GPS track's length over the odometer's), where it is near
+/// one of the usual confusions: km/h read as m/s (`1 / 3.6`), feet as
+/// metres (`0.3048`), knots (`0.514`, NMEA's speed) or mph (`0.447`) as
+/// m/s, km (`1000`) or miles (`1609`) as metres, centimetres (`0.01`), and
+/// each the other way round. The nearest in ratio is named if within
+/// [`UNIT_TOLERANCE`]: feet and km/h are only 9 % apart (`3.28` against
+/// `3.6`), so a wheel's few percent decide between them, not a wide band.
+pub fn distance_units(g: f64) -> Option<String> {
+    if !(g.is_finite() && g > 0.0) {
+        return None;
+    }
+    const CONFUSIONS: [(f64, &str); 7] = [
+        (3.6, "km/h and m/s"),
+        (1.0 / 0.3048, "feet and metres"),
+        (1.0 / 0.514_444, "knots and m/s"),
+        (1.0 / 0.447_04, "mph and m/s"),
+        (1000.0, "metres and km"),
+        (1609.344, "metres and miles"),
+        (100.0, "centimetres and metres"),
+    ];
+    // How far `g` lies from the factor `f` or its inverse, in ratio.
+    let off = |f: f64| (g.ln().abs() - f.ln()).abs();
+    let &(f, pair) = CONFUSIONS
+        .iter()
+        .min_by(|a, b| off(a.0).total_cmp(&off(b.0)))?;
+    let shown = if f > 10.0 {
+        format!("{f:.0}")
+    } else {
+        format!("{f:.3}")
+    };
+    let way = if g < 1.0 { "long" } else { "short" };
+    (off(f) < UNIT_TOLERANCE.ln_1p()).then(|| {
+        format!(
+            "a factor of {shown}, as between {pair}: the log's distance is {shown} times too {way}"
+        )
+    })
+}
+
+/// How far (as a fraction) a factor may lie from a unit confusion's to be
+/// named by [`distance_units`]: a wheel's circumference or a CAN scale is a
+/// few percent off.
+pub const UNIT_TOLERANCE: f64 = 0.06;
+
 /// The limits a fitted model's parameters break.
 pub fn parameters(model: &Model, theta: &[f64]) -> Vec<Violation> {
     let mut out = Vec::new();
@@ -123,8 +168,8 @@ pub fn parameters(model: &Model, theta: &[f64]) -> Vec<Violation> {
         let gain = theta[model.range(e).start];
         let cause = if gain <= 0.0 {
             "the path runs against the odometer: its sign, or the sensor's forward axis, is flipped (see `gyropath check`; --mount auto)".to_string()
-        } else if (gain / 3.6 - 1.0).abs() < 0.15 || (gain * 3.6 - 1.0).abs() < 0.15 {
-            "a factor of 3.6: the speed is in km/h where m/s is read, or the reverse".to_string()
+        } else if let Some(units) = distance_units(gain) {
+            units
         } else {
             "more than a wrong circumference explains: the odometer's units (ticks per metre, speed units) look wrong".to_string()
         };
@@ -162,6 +207,30 @@ mod tests {
 
     use super::*;
     use crate::model::ModelSpec;
+
+    #[test]
+    fn a_unit_confusion_is_named_by_the_nearest_factor_and_a_wheel_is_not() {
+        let said = |g: f64| distance_units(g).unwrap_or_default();
+        assert!(
+            said(1.0 / 3.6).contains("km/h and m/s"),
+            "{}",
+            said(1.0 / 3.6)
+        );
+        assert!(said(1.0 / 3.6).contains("3.600 times too long"));
+        // Feet and km/h are 9 % apart: a wheel 3 % long is still feet.
+        assert!(said(0.3048 * 1.03).contains("feet and metres"));
+        assert!(said(1.0 / 3.6 * 1.03).contains("km/h"));
+        assert!(said(0.514_444).contains("knots"));
+        assert!(said(1000.0 * 0.98).contains("metres and km"));
+        assert!(said(1000.0).contains("1000 times too short"));
+        assert!(said(1609.0).contains("miles"));
+        for wheel in [0.75, 0.9, 1.0, 1.1, 1.3] {
+            assert_eq!(distance_units(wheel), None, "{wheel}");
+        }
+        for nonsense in [0.0, -0.3048, f64::NAN, f64::INFINITY] {
+            assert_eq!(distance_units(nonsense), None, "{nonsense}");
+        }
+    }
 
     #[test]
     fn a_negative_gain_and_an_upside_down_sensor_are_named_with_their_cause() {

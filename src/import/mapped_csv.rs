@@ -24,7 +24,7 @@
 //! [odometer]
 //! kind = "speed"               # distance (cumulative m), speed, pulses (0/1 reed switch), ticks (cumulative)
 //! column = "speed"
-//! unit = "m/s"                 # speed: m/s, km/h or mph; distance: m or km
+//! unit = "m/s"                 # speed: m/s, km/h, mph or knots; distance: m, km, ft or mi
 //! circumference_m = 2.1        # pulses
 //! ticks_per_m = 1000.0         # ticks
 //! in_gps_file = false          # read the odometer column from the GPS file
@@ -372,7 +372,12 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
             unit_factor(
                 "speed",
                 odo.unit.as_deref().unwrap_or("m/s"),
-                &[("m/s", 1.0), ("km/h", 1.0 / 3.6), ("mph", 0.44704)],
+                &[
+                    ("m/s", 1.0),
+                    ("km/h", 1.0 / 3.6),
+                    ("mph", 0.44704),
+                    ("knots", 0.514_444),
+                ],
             )
             .map_err(map_err)?,
         ),
@@ -381,7 +386,7 @@ pub fn load(path: &Path, gps_path: Option<&Path>, map_path: &Path) -> Result<Rid
             unit_factor(
                 "distance",
                 odo.unit.as_deref().unwrap_or("m"),
-                &[("m", 1.0), ("km", 1000.0)],
+                &[("m", 1.0), ("km", 1000.0), ("ft", 0.3048), ("mi", 1609.344)],
             )
             .map_err(map_err)?,
         ),

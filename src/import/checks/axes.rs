@@ -114,7 +114,7 @@ pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64) {
 /// The axis whose integrated rate follows the GPS course, and beta.
 pub(super) fn course_vertical(
     fixes: &[AtFix],
-    (idx, stretch_m): (&[usize], f64),
+    stretches: &Stretches,
     report: &mut CheckReport,
 ) -> Option<(AxisFinding, f64)> {
     let course = |a: usize, b: usize| {
@@ -124,12 +124,18 @@ pub(super) fn course_vertical(
     };
     let (mut dc, mut dt) = (Vec::new(), Vec::new());
     let mut turns: [Vec<f64>; 3] = Default::default();
-    for w in idx.windows(3) {
+    // A chord shorter than half the road the odometer measured along it is
+    // no straight line (set along the GPS track, every chord is taken).
+    let curved = |len: f64, a: usize, b: usize| {
+        stretches
+            .odometer_per_m
+            .is_some_and(|per_m| len < 0.5 * (fixes[b].s - fixes[a].s) / per_m)
+    };
+    for w in stretches.idx.windows(3) {
         let (len1, c1) = course(w[0], w[1]);
         let (len2, c2) = course(w[1], w[2]);
-        let (s1, s2) = (fixes[w[1]].s - fixes[w[0]].s, fixes[w[2]].s - fixes[w[1]].s);
         // Straight-line stretches: the chord's course is the heading halfway along.
-        if len1 < 0.5 * s1 || len2 < 0.5 * s2 {
+        if curved(len1, w[0], w[1]) || curved(len2, w[1], w[2]) {
             continue;
         }
         let d = (c2 - c1 + 540.0).rem_euclid(360.0) - 180.0;
@@ -146,7 +152,10 @@ pub(super) fn course_vertical(
         report.say(
             "vertical axis (GPS course)",
             Level::Info,
-            format!("not checked: no straight stretch of {stretch_m:.0} m between the fixes"),
+            format!(
+                "not checked: no straight stretch of {:.0} m between the fixes",
+                stretches.length_m
+            ),
         );
         return None;
     }
@@ -156,8 +165,9 @@ pub(super) fn course_vertical(
             "vertical axis (GPS course)",
             Level::Info,
             format!(
-                "not checked: the track turns too little ({total:.0} deg over {} stretches of {stretch_m:.0} m)",
-                dc.len()
+                "not checked: the track turns too little ({total:.0} deg over {} stretches of {:.0} m)",
+                dc.len(),
+                stretches.length_m
             ),
         );
         return None;

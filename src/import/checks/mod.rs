@@ -42,7 +42,7 @@ use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
 use log::{sample_rate, saturation};
-use track::{AtFix, altitude, gps_units, odometer_scale, quality, stretches, summarise};
+use track::{AtFix, Stretches, altitude, gps_units, odometer_scale, quality, stretches, summarise};
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -215,8 +215,8 @@ pub fn check(log: &RideLog) -> CheckReport {
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.
-    let (idx, stretch_m) = stretches(&fixes);
-    let course = course_vertical(&fixes, (&idx, stretch_m), &mut report);
+    let stretches = stretches(&fixes);
+    let course = course_vertical(&fixes, &stretches, &mut report);
     let vertical = match (accel_up, course) {
         (Some(a), Some((c, _))) if a.axis != c.axis || a.sign != c.sign => {
             report.say(
@@ -262,7 +262,7 @@ pub fn check(log: &RideLog) -> CheckReport {
     }
     let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
     report.forward = forward;
-    odometer_scale(&fixes, &idx, &mut report);
+    odometer_scale(&fixes, &stretches.idx, &mut report);
     gps_units(log, &fixes, &mut report);
     altitude(log, &fixes, &mut report);
     quality(log, &mut report);
@@ -379,5 +379,49 @@ mod tests {
             "{:#?}",
             r.verdicts
         );
+    }
+
+    /// An odometer in km, in feet or standing still is named as such, and
+    /// the course check still reads the vertical (the stretches were set
+    /// by the odometer's distance and held every fix in one in km).
+    #[test]
+    fn an_odometer_in_the_wrong_units_or_standing_still_is_named() {
+        let scaled = |factor: f64| {
+            let mut log = ride();
+            for o in log.odo_m.as_mut().unwrap().iter_mut().flatten() {
+                *o *= factor;
+            }
+            check(&log)
+        };
+        let odometer = |r: &CheckReport| {
+            r.verdicts
+                .iter()
+                .find(|v| v.subject == "odometer")
+                .cloned()
+                .unwrap()
+        };
+        for (factor, says) in [
+            (0.001, "a factor of 1000, as between metres and km"),
+            (
+                1.0 / 0.3048,
+                "a factor of 3.281, as between feet and metres",
+            ),
+            (3.6, "a factor of 3.600, as between km/h and m/s"),
+            (0.0, "the odometer stands while the vehicle moves"),
+        ] {
+            let r = scaled(factor);
+            let o = odometer(&r);
+            assert_eq!(o.level, Level::Problem, "{factor}: {o:?}");
+            assert!(o.message.contains(says), "{factor}: {}", o.message);
+            if factor > 0.0 {
+                let ratio = r.odometer_per_gps.unwrap();
+                assert!((ratio / factor - 1.0).abs() < 0.05, "{factor}: {ratio}");
+                let v = r.vertical.unwrap();
+                assert_eq!((v.axis, v.sign), (2, 1.0), "{factor}");
+            }
+        }
+        // A wheel 8 % off is a circumference, not a unit.
+        let o = odometer(&scaled(1.08));
+        assert_eq!(o.level, Level::Ok, "{o:?}");
     }
 }

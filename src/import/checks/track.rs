@@ -65,12 +65,100 @@ pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec
     out
 }
 
-/// Stretches of the track: indices of fixes at least [`stretch_m`] apart
-/// along the odometer, and that length.
-pub(super) fn stretches(fixes: &[AtFix]) -> (Vec<usize>, f64) {
-    let length = stretch_m(fixes);
-    (stretches_of(fixes, length), length)
+/// Stretches of the track (see [`stretches`]).
+pub(super) struct Stretches {
+    /// Indices of the fixes that start and end them.
+    pub(super) idx: Vec<usize>,
+    /// Their length along the road (m).
+    pub(super) length_m: f64,
+    /// The odometer's units per metre of road they were set by; `None`
+    /// where they were set along the GPS track (the odometer stands).
+    pub(super) odometer_per_m: Option<f64>,
 }
+
+/// Stretches of the track: fixes at least [`stretch_m`] apart along the
+/// odometer.
+///
+/// The odometer is what sets them (the GPS track is lengthened by its own
+/// scatter), unless its units are wrong: a distance in km took every fix
+/// into one stretch of a 1.9 km drive, and the checks read "the GPS track
+/// is only 0 m long" and "no straight stretch" on it; in feet they read
+/// 2.6 m of odometer per GPS m, over stretches of 17 m of road. Where the
+/// odometer measures the stretches' track outside [`ODOMETER_OK`], they
+/// are set along the GPS track, and then again along the odometer at that
+/// length of road (the length times the odometer's units per GPS metre)
+/// where the odometer moves at all.
+pub(super) fn stretches(fixes: &[AtFix]) -> Stretches {
+    let length_m = stretch_m(fixes);
+    let idx = stretches_of(fixes, length_m);
+    let (odo, gps) = over_stretches(fixes, &idx);
+    let moved = fixes.last().map_or(0.0, |f| f.s);
+    if moved < 0.0 || (gps >= MIN_TRACK_M && ODOMETER_OK.contains(&(odo / gps))) {
+        return Stretches {
+            idx,
+            length_m,
+            odometer_per_m: Some(1.0),
+        };
+    }
+    let along = stretches_along_track(fixes, length_m);
+    let (odo, gps) = over_stretches(fixes, &along);
+    let ratio = odo / gps;
+    if gps >= MIN_TRACK_M && ratio >= MIN_MOVING_RATIO {
+        Stretches {
+            idx: stretches_of(fixes, length_m * ratio),
+            length_m,
+            odometer_per_m: Some(ratio),
+        }
+    } else {
+        Stretches {
+            idx: along,
+            length_m,
+            odometer_per_m: None,
+        }
+    }
+}
+
+/// The odometer's distance and the GPS track's over the stretches `idx`.
+fn over_stretches(fixes: &[AtFix], idx: &[usize]) -> (f64, f64) {
+    let (mut odo, mut gps) = (0.0, 0.0);
+    for w in idx.windows(2) {
+        let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
+        odo += b.s - a.s;
+        gps += (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1]);
+    }
+    (odo, gps)
+}
+
+/// Indices of fixes at least `length` (m) apart along the GPS track (each
+/// from the last one taken, in a straight line).
+fn stretches_along_track(fixes: &[AtFix], length: f64) -> Vec<usize> {
+    let mut idx: Vec<usize> = Vec::new();
+    for (k, f) in fixes.iter().enumerate() {
+        let far = idx.last().is_none_or(|&i| {
+            let a = &fixes[i];
+            (f.en[0] - a.en[0]).hypot(f.en[1] - a.en[1]) >= length
+        });
+        if far {
+            idx.push(k);
+        }
+    }
+    idx
+}
+
+/// Odometer metres per GPS metre that a wheel's circumference or a CAN
+/// scale explains.
+const ODOMETER_OK: std::ops::RangeInclusive<f64> = 0.85..=1.15;
+
+/// Shortest GPS track (m) over the stretches whose length the odometer is checked against.
+const MIN_TRACK_M: f64 = 50.0;
+
+/// Below this many odometer units per GPS metre the odometer is taken to
+/// stand still (km give 0.001, miles 0.0006).
+const MIN_MOVING_RATIO: f64 = 1e-4;
+
+/// Below this many odometer metres per GPS metre, and no unit confusion
+/// named, the odometer is said to stand while the vehicle moves.
+const STANDING_RATIO: f64 = 0.01;
 
 /// How long a stretch of GPS track must be to read the road rather than
 /// the fixes' noise: [`STRETCH_M`], or [`STRETCH_PER_SCATTER`] times the
@@ -118,12 +206,7 @@ pub(super) const STRETCH_PER_SCATTER: f64 = 10.0;
 /// Odometer distance against the GPS track length, over the stretches
 /// `idx` (see [`stretches`]) that moved.
 pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckReport) {
-    let (mut odo, mut gps) = (0.0, 0.0);
-    for w in idx.windows(2) {
-        let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
-        odo += b.s - a.s;
-        gps += ((b.en[0] - a.en[0]).powi(2) + (b.en[1] - a.en[1]).powi(2)).sqrt();
-    }
+    let (odo, gps) = over_stretches(fixes, idx);
     let total_odo = fixes.last().map_or(0.0, |f| f.s);
     if total_odo < 0.0 && total_odo.abs() > 10.0 {
         report.say(
@@ -135,7 +218,7 @@ pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckR
         );
         return;
     }
-    if gps < 50.0 {
+    if gps < MIN_TRACK_M {
         report.say(
             "odometer",
             Level::Info,
@@ -145,12 +228,18 @@ pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckR
     }
     let ratio = odo / gps;
     report.odometer_per_gps = Some(ratio);
-    let (level, note) = if (0.85..=1.15).contains(&ratio) {
+    let (level, note) = if ODOMETER_OK.contains(&ratio) {
         (Level::Ok, String::new())
-    } else if (ratio * 3.6 - 1.0).abs() < 0.15 {
-        (Level::Problem, ": km/h logged as m/s?".into())
-    } else if (ratio / 3.6 - 1.0).abs() < 0.15 {
-        (Level::Problem, ": m/s logged as km/h?".into())
+    } else if ratio < STANDING_RATIO {
+        (
+            Level::Problem,
+            match crate::limits::distance_units(1.0 / ratio) {
+                Some(units) => format!(": {units}"),
+                None => ": the odometer stands while the vehicle moves (a wheel sensor without a signal, or a column that is not the distance)".into(),
+            },
+        )
+    } else if let Some(units) = crate::limits::distance_units(1.0 / ratio) {
+        (Level::Problem, format!(": {units}"))
     } else {
         (
             Level::Warning,
@@ -161,7 +250,9 @@ pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckR
         "odometer",
         level,
         format!(
-            "it measures {ratio:.3} m per metre of GPS track ({odo:.0} m against {gps:.0} m){note}"
+            "it measures {ratio:.digits$} m per metre of GPS track ({odo:.odo_digits$} m against {gps:.0} m){note}",
+            digits = if ratio.abs() < 0.01 { 6 } else { 3 },
+            odo_digits = if odo.abs() < 10.0 { 3 } else { 0 }
         ),
     );
 }
