@@ -77,3 +77,162 @@ pub(super) fn saturation(log: &RideLog, report: &mut CheckReport) {
         }
     }
 }
+
+/// Runs of rows on which the gyro repeats one reading on all three axes,
+/// `(first row, last row)`, that last at least [`MIN_STUCK_S`] and
+/// [`MIN_STUCK_ROWS`], and [`STUCK_PER_TYPICAL`] times the 95th percentile
+/// of the log's runs (a slow gyro written on every row of a faster log
+/// repeats each reading as a matter of course).
+fn repeated_readings(log: &RideLog) -> Vec<(usize, usize)> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for j in 1..=log.len() {
+        if j < log.len() && log.gyro_dps[j] == log.gyro_dps[j - 1] {
+            continue;
+        }
+        runs.push((start, j - 1));
+        start = j;
+    }
+    let mut spans: Vec<f64> = runs.iter().map(|&(a, b)| log.t_s[b] - log.t_s[a]).collect();
+    let typical = crate::statistics::quantile(&mut spans, 0.95);
+    let shortest = MIN_STUCK_S.max(STUCK_PER_TYPICAL * typical);
+    runs.retain(|&(a, b)| b - a + 1 >= MIN_STUCK_ROWS && log.t_s[b] - log.t_s[a] >= shortest);
+    runs
+}
+
+/// A gyro that stopped answering: one reading repeated on every axis, row
+/// after row. A logger writes zeros, or its last reading, when its IMU
+/// stops answering (a loose I2C wire, a driver's hiccup), and the heading
+/// is then wrong from there on: Berlin's yaw rate held at its last reading
+/// for 25 s sent the fit 58 m from its fixes. A MEMS gyro's noise never
+/// repeats a reading on all three axes for a second, so named as a problem:
+///
+/// - a nonzero reading held (no sensor holds one; integrated, it turns the
+///   heading at that rate);
+/// - zeros on all three axes while the odometer moves `MIN_MOVED_M`, in a
+///   log whose three axes read something elsewhere (a moving vehicle's
+///   gyro is never exactly still).
+///
+/// A log with an axis that never reads (a car's yaw-rate sensor alone) may
+/// hold 0.00 along a straight within the sensor's deadband; there a run of
+/// zeros is named, as a warning, only where the GPS course turns by more
+/// than [`STUCK_TURN_DEG`] across it, read from chords of the stretches'
+/// length either side (straight lines, as in the course check) against the
+/// gyro's turn between the chords' middles about `vertical`, or the axis
+/// that comes nearest where the vertical is not known. City fixes blur
+/// that: 25 s of zeros in a 37 deg bend of Berlin's drive are not seen by
+/// it (its 57 m chords turn with the gyro's zeros to a degree).
+pub(super) fn stuck_gyro(
+    log: &RideLog,
+    distance: &[f64],
+    (fixes, stretches): (&[AtFix], &Stretches),
+    vertical: Option<(usize, f64)>,
+    report: &mut CheckReport,
+) {
+    let three_axes = (0..3).all(|a| log.gyro_dps.iter().any(|g| g[a] != 0.0));
+    let mut found: Vec<(usize, usize, Level, String)> = Vec::new();
+    for (first, last) in repeated_readings(log) {
+        let g = log.gyro_dps[first];
+        let moved: f64 = distance[first + 1..=last].iter().sum();
+        if g != [0.0; 3] {
+            found.push((first, last, Level::Problem, String::new()));
+        } else if three_axes && moved >= MIN_MOVED_M {
+            found.push((
+                first,
+                last,
+                Level::Problem,
+                format!(" while the odometer moves {moved:.0} m"),
+            ));
+        } else if let Some(missed) = course_missed(first, last, log, (fixes, stretches), vertical)
+            && missed > STUCK_TURN_DEG
+        {
+            found.push((
+                first,
+                last,
+                Level::Warning,
+                format!(" while the GPS course turns {missed:.0} deg more than it does"),
+            ));
+        }
+    }
+    let worst = found
+        .iter()
+        .max_by(|a, b| (a.2, a.1 - a.0).cmp(&(b.2, b.1 - b.0)));
+    let Some((first, last, level, why)) = worst else {
+        return;
+    };
+    let (first, last) = (*first, *last);
+    let g = log.gyro_dps[first];
+    report.say(
+        "gyro stopped",
+        *level,
+        format!(
+            "the gyro repeats one reading ({}, {}, {} as labelled) on every row from t = {:.2} to {:.2} s (lines {}-{}){why}{}: a sensor that stopped answering, its dropout written as zeros or its last reading repeated; the heading is lost there, so fit each side apart (--between) or mend the log",
+            g[0],
+            g[1],
+            g[2],
+            log.t_s[first],
+            log.t_s[last],
+            log.line.get(first).copied().unwrap_or(first as u64 + 2),
+            log.line.get(last).copied().unwrap_or(last as u64 + 2),
+            if found.len() > 1 {
+                format!(" (the longest of {} such runs)", found.len())
+            } else {
+                String::new()
+            }
+        ),
+    );
+}
+
+/// How far (deg) the GPS course turns beyond the gyro across rows
+/// `first..=last` (see [`stuck_gyro`]); `None` where the fixes cannot tell.
+fn course_missed(
+    first: usize,
+    last: usize,
+    log: &RideLog,
+    (fixes, stretches): (&[AtFix], &Stretches),
+    vertical: Option<(usize, f64)>,
+) -> Option<f64> {
+    let per_m = stretches.odometer_per_m?;
+    let length = stretches.length_m * per_m;
+    let course = |a: &AtFix, b: &AtFix| {
+        let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
+        let straight = de.hypot(dn) >= 0.5 * (b.s - a.s) / per_m;
+        straight.then(|| dn.atan2(de).to_degrees())
+    };
+    let (ta, tb) = (log.t_s[first], log.t_s[last]);
+    let ka = fixes.iter().rposition(|f| f.t <= ta)?;
+    let kb = fixes.iter().position(|f| f.t >= tb)?;
+    let ka0 = (0..ka)
+        .rev()
+        .find(|&k| fixes[ka].s - fixes[k].s >= length)?;
+    let kb1 = (kb + 1..fixes.len()).find(|&k| fixes[k].s - fixes[kb].s >= length)?;
+    let turned = course(&fixes[kb], &fixes[kb1])? - course(&fixes[ka0], &fixes[ka])?;
+    let gyro = |a: usize| {
+        0.5 * (fixes[kb].turn[a] + fixes[kb1].turn[a] - fixes[ka0].turn[a] - fixes[ka].turn[a])
+    };
+    // The course is known modulo a full turn.
+    let off = |x: f64| ((x + 540.0).rem_euclid(360.0) - 180.0).abs();
+    Some(match vertical {
+        Some((axis, sign)) => off(turned - sign * gyro(axis)),
+        None => (0..3)
+            .flat_map(|a| [off(turned - gyro(a)), off(turned + gyro(a))])
+            .fold(f64::INFINITY, f64::min),
+    })
+}
+
+/// Shortest run of repeated gyro readings (s, rows) that [`stuck_gyro`] looks at.
+const MIN_STUCK_S: f64 = 1.0;
+const MIN_STUCK_ROWS: usize = 5;
+
+/// A run of repeated readings is at least this many times the log's
+/// typical run (see [`repeated_readings`]).
+const STUCK_PER_TYPICAL: f64 = 5.0;
+
+/// Odometer distance (m) over a run of zeros that says the vehicle moved.
+const MIN_MOVED_M: f64 = 2.0;
+
+/// How far (deg) the GPS course must turn beyond the gyro across a run of
+/// zeros for [`stuck_gyro`] to name it: a chord of the stretches' length
+/// (ten times the fixes' scatter) reads its course to some 8 deg, the
+/// difference of two to some 11.
+const STUCK_TURN_DEG: f64 = 30.0;

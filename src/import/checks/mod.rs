@@ -41,7 +41,7 @@ mod track;
 use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
-use log::{sample_rate, saturation};
+use log::{sample_rate, saturation, stuck_gyro};
 use track::{AtFix, Stretches, altitude, gps_units, odometer_scale, quality, stretches, summarise};
 
 /// How much a verdict matters.
@@ -257,6 +257,13 @@ pub fn check(log: &RideLog) -> CheckReport {
             ),
         );
     }
+    stuck_gyro(
+        log,
+        &distance,
+        (&fixes, &stretches),
+        vertical.map(|v| (v.axis, v.sign)),
+        &mut report,
+    );
     if let Some((c, beta)) = course {
         gyro_units(beta, c, &mut report);
     }
@@ -423,5 +430,67 @@ mod tests {
         // A wheel 8 % off is a circumference, not a unit.
         let o = odometer(&scaled(1.08));
         assert_eq!(o.level, Level::Ok, "{o:?}");
+    }
+
+    /// A gyro that stops answering, its dropout written as zeros or its
+    /// last reading held, is named with its rows; a log with a yaw rate
+    /// alone that reads 0 where the course does not turn is not.
+    #[test]
+    fn a_gyro_that_stops_answering_is_named() {
+        let stopped = |held: Option<[f64; 3]>| {
+            let mut log = ride();
+            let (a, b) = (200 * 50, 230 * 50);
+            let value = held.unwrap_or(log.gyro_dps[a - 1]);
+            for g in &mut log.gyro_dps[a..b] {
+                *g = value;
+            }
+            check(&log)
+                .verdicts
+                .into_iter()
+                .find(|v| v.subject == "gyro stopped")
+        };
+        assert_eq!(stopped(Some([0.0; 3])).unwrap().level, Level::Problem);
+        let held = stopped(None).unwrap();
+        assert_eq!(held.level, Level::Problem);
+        assert!(
+            held.message
+                .contains("from t = 199.98 to 229.98 s (lines 10001-11501)"),
+            "{}",
+            held.message
+        );
+        assert!(
+            check(&ride())
+                .verdicts
+                .iter()
+                .all(|v| v.subject != "gyro stopped")
+        );
+
+        // A yaw rate alone (x and y never read): zeros for 2 s where the
+        // vehicle barely turns (its yaw rate crosses zero at t = 25.7 s) are
+        // a deadband, not named; zeros through 20 s of a bend are, from the
+        // GPS course, as a warning.
+        let yaw_only = |from_s: f64, to_s: f64| {
+            let mut log = ride();
+            for (g, &t) in log.gyro_dps.iter_mut().zip(&log.t_s) {
+                g[0] = 0.0;
+                g[1] = 0.0;
+                if (from_s..to_s).contains(&t) {
+                    g[2] = 0.0;
+                }
+            }
+            check(&log)
+                .verdicts
+                .into_iter()
+                .find(|v| v.subject == "gyro stopped")
+        };
+        assert_eq!(yaw_only(0.0, 0.0), None);
+        assert_eq!(yaw_only(24.7, 26.7), None);
+        let bend = yaw_only(300.0, 320.0).unwrap();
+        assert_eq!(bend.level, Level::Warning);
+        assert!(
+            bend.message.contains("the GPS course turns"),
+            "{}",
+            bend.message
+        );
     }
 }
