@@ -119,9 +119,12 @@ fn repeated_readings(log: &RideLog) -> Vec<(usize, usize)> {
 /// than [`STUCK_TURN_DEG`] across it, read from chords of the stretches'
 /// length either side (straight lines, as in the course check) against the
 /// gyro's turn between the chords' middles about `vertical`, or the axis
-/// that comes nearest where the vertical is not known. City fixes blur
-/// that: 25 s of zeros in a 37 deg bend of Berlin's drive are not seen by
-/// it (its 57 m chords turn with the gyro's zeros to a degree).
+/// that comes nearest where the vertical is not known; or where it lasts
+/// [`MIN_LONE_ZEROS_S`] while the vehicle moves and the sensor has no
+/// deadband (see [`zeros_while_moving`]). City fixes blur the course: 25 s
+/// of zeros in a 37 deg bend of Berlin's drive are not seen by it (its
+/// 57 m chords turn with the gyro's zeros to a degree), but its yaw rate
+/// reads zero on 1.3 % of the rows that move elsewhere.
 pub(super) fn stuck_gyro(
     log: &RideLog,
     distance: &[f64],
@@ -151,6 +154,19 @@ pub(super) fn stuck_gyro(
                 last,
                 Level::Warning,
                 format!(" while the GPS course turns {missed:.0} deg more than it does"),
+            ));
+        } else if moved >= MIN_MOVED_M
+            && log.t_s[last] - log.t_s[first] >= MIN_LONE_ZEROS_S
+            && zeros_while_moving(log, distance, (first, last)) < MAX_DEADBAND_SHARE
+        {
+            found.push((
+                first,
+                last,
+                Level::Warning,
+                format!(
+                    " while the odometer moves {moved:.0} m, where elsewhere it reads zero on {:.1} % of the rows that move",
+                    100.0 * zeros_while_moving(log, distance, (first, last))
+                ),
             ));
         }
     }
@@ -182,6 +198,29 @@ pub(super) fn stuck_gyro(
         ),
     );
 }
+
+/// The share of the rows on which the vehicle moves, outside rows
+/// `skip`, where the gyro reads zero on every axis: a sensor with a
+/// deadband reads zero along every straight, one without it seldom
+/// (Berlin's yaw rate on 18 of 1357 rows, 1.3 %).
+fn zeros_while_moving(log: &RideLog, distance: &[f64], skip: (usize, usize)) -> f64 {
+    let (mut moving, mut zeros) = (0usize, 0usize);
+    for j in (1..log.len()).filter(|&j| distance[j] > 0.0 && !(skip.0..=skip.1).contains(&j)) {
+        moving += 1;
+        zeros += usize::from(log.gyro_dps[j] == [0.0; 3]);
+    }
+    if moving == 0 {
+        return 1.0;
+    }
+    zeros as f64 / moving as f64
+}
+
+/// A run of zeros on a gyro with an axis that never reads is named, where
+/// the GPS course cannot tell, if it lasts this long (s) while the vehicle
+/// moves and the sensor reads zero elsewhere on less than
+/// [`MAX_DEADBAND_SHARE`] of the rows that move.
+const MIN_LONE_ZEROS_S: f64 = 5.0;
+const MAX_DEADBAND_SHARE: f64 = 0.05;
 
 /// How far (deg) the GPS course turns beyond the gyro across rows
 /// `first..=last` (see [`stuck_gyro`]); `None` where the fixes cannot tell.

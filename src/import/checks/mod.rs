@@ -469,12 +469,12 @@ mod tests {
         // vehicle barely turns (its yaw rate crosses zero at t = 25.7 s) are
         // a deadband, not named; zeros through 20 s of a bend are, from the
         // GPS course, as a warning.
-        let yaw_only = |from_s: f64, to_s: f64| {
+        let yaw_deadband = |from_s: f64, to_s: f64, deadband_dps: f64| {
             let mut log = ride();
             for (g, &t) in log.gyro_dps.iter_mut().zip(&log.t_s) {
                 g[0] = 0.0;
                 g[1] = 0.0;
-                if (from_s..to_s).contains(&t) {
+                if (from_s..to_s).contains(&t) || g[2].abs() < deadband_dps {
                     g[2] = 0.0;
                 }
             }
@@ -483,6 +483,7 @@ mod tests {
                 .into_iter()
                 .find(|v| v.subject == "gyro stopped")
         };
+        let yaw_only = |from_s, to_s| yaw_deadband(from_s, to_s, 0.0);
         assert_eq!(yaw_only(0.0, 0.0), None);
         assert_eq!(yaw_only(24.7, 26.7), None);
         let bend = yaw_only(300.0, 320.0).unwrap();
@@ -492,5 +493,15 @@ mod tests {
             "{}",
             bend.message
         );
+        // Zeros for 6 s where it barely turns: a sensor that reads zero
+        // nowhere else has stopped; one with a deadband of 3 deg/s (zero on
+        // a fifth of the rows that move) is within it.
+        let lone = yaw_only(22.7, 28.7).unwrap();
+        assert!(
+            lone.message.contains("elsewhere it reads zero on 0.0 %"),
+            "{}",
+            lone.message
+        );
+        assert_eq!(yaw_deadband(22.7, 28.7, 3.0), None);
     }
 }
