@@ -205,6 +205,34 @@ fn known(name: &str) -> Option<Known> {
     KNOWN.iter().find(|(n, _)| *n == name).map(|&(_, k)| k)
 }
 
+/// Why column `name` is missing from a header of `names`, with what may
+/// stand for it: the same name in other letter case or with a unit
+/// suffix left off ("T_S", "gx"), or else the header's own names and how
+/// a CSV of another layout is read.
+fn missing_column(name: &str, names: &[String]) -> String {
+    let stem = name.rsplit_once('_').map_or(name, |(stem, _)| stem);
+    let near = names
+        .iter()
+        .find(|n| n.eq_ignore_ascii_case(name) || (stem != name && n.eq_ignore_ascii_case(stem)));
+    match near {
+        Some(n) => format!(
+            "required column is missing from the header, which has '{n}': the format's column names are lower case and end in their unit, as '{name}'"
+        ),
+        None => {
+            let shown: Vec<&str> = names.iter().take(12).map(String::as_str).collect();
+            format!(
+                "required column is missing from the header ({}{}); a CSV of another layout is read with a column map: --map FILE.toml (docs/real-logs.md)",
+                shown.join(", "),
+                if names.len() > shown.len() {
+                    ", ..."
+                } else {
+                    ""
+                }
+            )
+        }
+    }
+}
+
 /// Where each column sits in a row.
 struct Columns {
     names: Vec<String>,
@@ -261,8 +289,7 @@ impl Columns {
         }
         let find = |k: Known| names.iter().position(|n| known(n) == Some(k));
         let require = |k: Known, name: &str| {
-            find(k)
-                .ok_or_else(|| field_err(name, "required column is missing from the header".into()))
+            find(k).ok_or_else(|| field_err(name, missing_column(name, &names)))
         };
         let t = require(Known::T, "t_s")?;
         let no_gyro = [Known::Gx, Known::Gy, Known::Gz]
@@ -1146,7 +1173,21 @@ mod tests {
         );
         let e = err(&GOOD.replace("gz_dps,", "gq_dps,"));
         assert!(
-            e.contains("bad.csv:3: column 'gz_dps': required column is missing"),
+            e.contains("bad.csv:3: column 'gz_dps': required column is missing")
+                && e.contains("gq_dps")
+                && e.contains("--map FILE.toml"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("t_s,", "T_S,"));
+        assert!(
+            e.contains("column 't_s': required column is missing from the header, which has 'T_S'"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("gz_dps,", "gz,"));
+        assert!(
+            e.contains(
+                "column 'gz_dps': required column is missing from the header, which has 'gz'"
+            ),
             "{e}"
         );
         let e = err("t_s,lat_deg,lon_deg,alt_m\n0.0,52.5,13.3,40.0\n");
