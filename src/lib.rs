@@ -31,6 +31,7 @@ pub mod effects;
 pub mod explain;
 pub mod export;
 pub mod geodesy;
+pub mod gyro_stops;
 pub mod import;
 pub mod limits;
 pub mod model;

@@ -113,6 +113,56 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<(String, [(f64, f64); 2])
     Some((message, [(first, before), (after, last)]))
 }
 
+/// The stops of a gyro that stopped answering (see [`crate::gyro_stops`])
+/// in the step rates `gyro` (rad/s) of rows at `t` moving `distance`, as
+/// `(t_a, t_b)`: the rates of their steps (`t_a < t_j <= t_b`, the run's
+/// rows) are made anew so that a held reading turns nothing of its own.
+///
+/// - About z, the line between the readings either side (as across a gap
+///   in the log), the turn across the stop being the free parameter of
+///   `effects::gyro_stops`, spread evenly on top of it. A constant rate
+///   there (the two readings' mean) lost the shape of the turn inside the
+///   stop: on Berlin's yaw rate held for 25 s after a reading of -27 deg/s
+///   in a right bend (the next one -3 deg/s, the car turning left between),
+///   39 m from the reference against 17 m along the line.
+/// - About x and y, the log's median rate: a vehicle's roll and pitch come
+///   back to where they were, so over a stop they turn by the bias alone.
+///   The line between the readings either side rolled a simulated bicycle,
+///   caught leaning into a bend at the stop's start and out of it at its
+///   end, by tens of degrees over a 15 s stop, and the fit failed 75 m from
+///   its fixes.
+fn bridge_stops(t: &[f64], gyro: &mut [Vector3<f64>], distance: &[f64]) -> Vec<(f64, f64)> {
+    let runs: Vec<_> = crate::gyro_stops::find(t, |j| gyro[j].into(), distance)
+        .into_iter()
+        .filter(|r| r.kind.is_some())
+        .collect();
+    if runs.is_empty() {
+        return Vec::new();
+    }
+    let median = |a: usize| {
+        let mut v: Vec<f64> = gyro.iter().skip(1).map(|w| w[a]).collect();
+        crate::statistics::quantile(&mut v, 0.5)
+    };
+    let (roll, pitch) = (median(0), median(1));
+    let mut stops = Vec::new();
+    for run in runs {
+        let (first, last) = (run.first.max(1), run.last);
+        let before = gyro[first - 1].z;
+        let after = gyro.get(last + 1).map_or(before, |w| w.z);
+        let (ta, tb) = (t[first - 1], t.get(last + 1).copied().unwrap_or(t[last]));
+        for j in first..=last {
+            let f = if tb > ta {
+                (t[j] - ta) / (tb - ta)
+            } else {
+                0.0
+            };
+            gyro[j] = Vector3::new(roll, pitch, before + (after - before) * f);
+        }
+        stops.push((t[first - 1], t[last]));
+    }
+    stops
+}
+
 /// The longest gap between rows (s) across which the rotation is
 /// interpolated (see `step_rates`); a longer one is a pause: a logger
 /// stopped, a bike computer's or phone app's auto-pause. Across a 10-minute
@@ -181,6 +231,11 @@ pub struct Signals {
     /// The device's boot-clock time (s) of `t = 0`, when the log gives it
     /// (comma2k19: every signal and its reference pose run on that clock).
     pub t0_boot_s: Option<f64>,
+    /// Where the gyro stopped answering (see [`crate::gyro_stops`]): the
+    /// times `(t_a, t_b)` whose steps `t_a < t_j <= t_b` carry rates
+    /// interpolated between the readings either side, and whose turn
+    /// `effects::gyro_stops` fits.
+    pub gyro_stops: Vec<(f64, f64)>,
     /// Per row, the spread (m^2) of the distance inside the GNSS-speed gaps
     /// that no parameter carries (`effects::gnss_gaps`), filled by the first
     /// model built on these signals: it depends on them alone, and the noise
@@ -469,6 +524,7 @@ impl Signals {
         let (distance, jumps) =
             odometer_distance_and_jumps(log, |j| gyro[j].map(f64::to_degrees).into());
         let (distance, odometer) = distance?;
+        let gyro_stops = bridge_stops(&t, &mut gyro, &distance);
         if attitude.is_planar() {
             for w in &mut gyro {
                 w.x = 0.0;
@@ -593,6 +649,7 @@ impl Signals {
             t0_unix_s,
             t0_boot_s,
             has_gnss_speed: log.gnss_speed_samples() >= 2,
+            gyro_stops,
             gap_spread: std::sync::OnceLock::new(),
             coarse_steps: std::sync::OnceLock::new(),
         })
@@ -691,6 +748,7 @@ impl Signals {
             has_baro: self.has_baro,
             has_gps_alt: self.has_gps_alt,
             has_gnss_speed: self.has_gnss_speed,
+            gyro_stops: self.gyro_stops.clone(),
             channels,
             odometer: self.odometer.clone(),
             attitude: self.attitude.clone(),

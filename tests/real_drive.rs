@@ -130,3 +130,44 @@ fn diagnose_runs_on_a_one_minute_drive_and_points_at_the_gps_latency() {
     assert_eq!(best.effect, "gps_lag");
     assert!(best.drop > 0.1);
 }
+
+/// The gyro of the same minute stops answering for 10 s (20-30 s), its
+/// rows written as zeros or as its last reading held, as a logger that
+/// loses its IMU writes them: the stop is found, the turn across it fitted
+/// (`gyro_stops`), and the path stays as near comma's reference as with
+/// the gyro whole (1.25 m). Before, the zeros ended in a fit refused as
+/// "not physical" (a start tilt of 53 deg standing in for them).
+#[test]
+fn a_gyro_that_stops_answering_for_ten_seconds_is_bridged() {
+    let whole = load_file(&data("ride.csv")).expect("load");
+    for held in [false, true] {
+        let mut log = whole.clone();
+        let first = log.t_s.partition_point(|&t| t < 20.0);
+        let end = log.t_s.partition_point(|&t| t < 30.0);
+        let value = if held {
+            log.gyro_dps[first - 1]
+        } else {
+            [0.0; 3]
+        };
+        for g in &mut log.gyro_dps[first..end] {
+            *g = value;
+        }
+        let sig = Arc::new(Signals::from_log(&log).expect("signals"));
+        assert_eq!(sig.gyro_stops.len(), 1, "held {held}: {:?}", sig.gyro_stops);
+        let (a, b) = sig.gyro_stops[0];
+        assert!(
+            (a - 20.0).abs() < 0.02 && (b - 30.0).abs() < 0.02,
+            "{a}-{b}"
+        );
+        let truth = reference(&sig);
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+        fit.finish();
+        assert!(fit.model().effect_index("gyro_stops").is_some());
+        let broken = gyropath::limits::check(fit.model(), fit.params());
+        assert!(broken.is_empty(), "held {held}: {broken:?}");
+        let path = fit.trajectory().p;
+        let rms = horizontal_rms(path.iter().copied().zip(truth.iter().copied()));
+        eprintln!("held {held}: path {rms:.3} m from the reference");
+        assert!(rms < 1.4, "held {held}: {rms} m from the reference");
+    }
+}

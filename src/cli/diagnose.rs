@@ -134,7 +134,10 @@ fn diagnosis_text(d: &Diagnosis, ride: &Path, verbose: bool) -> String {
         .model
         .iter()
         .map(String::as_str)
-        .filter(|id| !gyropath::effects::PAPER.contains(id) && *id != "baro_offset")
+        .filter(|id| {
+            !gyropath::effects::PAPER.contains(id)
+                && !gyropath::effects::COMES_WITH_THE_DATA.contains(id)
+        })
         .collect();
     match d.ranking.first() {
         _ if !d.not_physical.is_empty() => {

@@ -5,7 +5,7 @@
 //!
 //! | site | what the effect maps | used by |
 //! | --- | --- | --- |
-//! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments`, `gyro_bias_channel:<c>`, `gyro_scale` |
+//! | gyro | rate `omega_j` (rad/s) of step `j` -> corrected rate | `gyro_bias`, `gyro_bias_segments`, `gyro_bias_channel:<c>`, `gyro_scale`, `gyro_stops` |
 //! | distance | odometer distance `d_j` of step `j` -> corrected distance | `speed_lag`, `odometer_gain`, `gnss_gaps` |
 //! | forward axis | the vehicle's forward axis in sensor axes, `dir_t = q_t f` | `mount_misalignment` |
 //! | start | initial orientation and position | `initial_orientation`, `initial_position` |
@@ -32,6 +32,7 @@ mod gyro_bias;
 mod gyro_bias_channel;
 mod gyro_bias_segments;
 mod gyro_scale;
+mod gyro_stops;
 mod initial_orientation;
 mod initial_position;
 pub mod mount_misalignment;
@@ -48,6 +49,7 @@ pub use gyro_bias::GyroBias;
 pub use gyro_bias_channel::GyroBiasChannel;
 pub use gyro_bias_segments::GyroBiasSegments;
 pub use gyro_scale::GyroScale;
+pub use gyro_stops::GyroStops;
 pub use initial_orientation::InitialOrientation;
 pub use initial_position::InitialPosition;
 pub use mount_misalignment::MountMisalignment;
@@ -81,9 +83,10 @@ pub const PAPER: [&str; 5] = [
 /// Expand a list of ids (`paper` stands for the paper's five) into effect ids
 /// in registry order, without duplicates. `-id` takes an effect out again
 /// (`paper,-odometer_gain`: the paper's model with the odometer taken as
-/// calibrated). `baro_offset` is added whenever the log has a barometer, and
+/// calibrated). `baro_offset` is added whenever the log has a barometer,
 /// `gnss_gaps` whenever the distance is the GNSS speed's and it has gaps
-/// (`-gnss_gaps` takes it out).
+/// (`-gnss_gaps` takes it out), and `gyro_stops` whenever the gyro stopped
+/// answering somewhere (`-gyro_stops`).
 pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelError> {
     let mut ids: Vec<String> = Vec::new();
     let mut removed: Vec<String> = Vec::new();
@@ -105,6 +108,9 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
     if GnssGaps::applies(signals) {
         ids.push("gnss_gaps".into());
     }
+    if GyroStops::applies(signals) {
+        ids.push("gyro_stops".into());
+    }
     ids.retain(|id| !removed.contains(id));
     if signals.has_baro {
         ids.push("baro_offset".into());
@@ -116,7 +122,7 @@ pub fn expand(list: &[String], signals: &Signals) -> Result<Vec<String>, ModelEr
 }
 
 /// All ids in registry order (the order effects are chained in).
-pub const REGISTRY: [&str; 14] = [
+pub const REGISTRY: [&str; 15] = [
     "initial_position",
     "initial_orientation",
     "speed_lag",
@@ -126,6 +132,7 @@ pub const REGISTRY: [&str; 14] = [
     "gyro_bias_segments",
     CHANNEL_PREFIX,
     "gyro_scale",
+    "gyro_stops",
     "mount_misalignment",
     "gps_lag",
     "baro_offset",
@@ -219,6 +226,7 @@ pub fn build(
         "odometer_gain" => Box::new(OdometerGain),
         "speed_lag" => Box::new(SpeedLag::new(signals)?),
         "gnss_gaps" => Box::new(GnssGaps::new(signals)?),
+        "gyro_stops" => Box::new(GyroStops::new(signals)?),
         "gyro_bias" => Box::new(GyroBias::new(start, signals.attitude.is_planar())),
         "gyro_bias_segments" => Box::new(GyroBiasSegments::new(
             signals,
@@ -252,16 +260,20 @@ pub fn build(
     })
 }
 
+/// Effects added by themselves where the data have what they model.
+pub const COMES_WITH_THE_DATA: [&str; 3] = ["baro_offset", "gnss_gaps", "gyro_stops"];
+
 /// A model's effect list ("initial_position, ..., gps_lag") with the
-/// paper's five said once: "paper + gps_lag" (a barometer's offset and the
-/// GNSS gaps' distances, which come with the data, are left out); other
+/// paper's five said once: "paper + gps_lag" (a barometer's offset, the
+/// GNSS gaps' distances and the gyro stops' turns, which come with the
+/// data, are left out); other
 /// lists as they are.
 pub fn short_model(model: &str) -> String {
     let ids: Vec<&str> = model.split(", ").collect();
     if PAPER.iter().all(|p| ids.contains(p)) {
         let extra: Vec<&str> = ids
             .into_iter()
-            .filter(|i| !PAPER.contains(i) && *i != "baro_offset" && *i != "gnss_gaps")
+            .filter(|i| !PAPER.contains(i) && !COMES_WITH_THE_DATA.contains(i))
             .collect();
         if extra.is_empty() {
             "paper".to_string()

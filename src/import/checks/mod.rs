@@ -466,9 +466,10 @@ mod tests {
         );
 
         // A yaw rate alone (x and y never read): zeros for 2 s where the
-        // vehicle barely turns (its yaw rate crosses zero at t = 25.7 s) are
-        // a deadband, not named; zeros through 20 s of a bend are, from the
-        // GPS course, as a warning.
+        // vehicle barely turns (its yaw rate crosses zero at t = 25.7 s) may
+        // be a deadband, not named; zeros through 20 s of a bend on a
+        // sensor with a deadband of 3 deg/s are, from the GPS course, as a
+        // warning (the fit cannot tell them from the deadband).
         let yaw_deadband = |from_s: f64, to_s: f64, deadband_dps: f64| {
             let mut log = ride();
             for (g, &t) in log.gyro_dps.iter_mut().zip(&log.t_s) {
@@ -486,7 +487,7 @@ mod tests {
         let yaw_only = |from_s, to_s| yaw_deadband(from_s, to_s, 0.0);
         assert_eq!(yaw_only(0.0, 0.0), None);
         assert_eq!(yaw_only(24.7, 26.7), None);
-        let bend = yaw_only(300.0, 320.0).unwrap();
+        let bend = yaw_deadband(300.0, 320.0, 3.0).unwrap();
         assert_eq!(bend.level, Level::Warning);
         assert!(
             bend.message.contains("the GPS course turns"),
@@ -497,6 +498,12 @@ mod tests {
         // nowhere else has stopped; one with a deadband of 3 deg/s (zero on
         // a fifth of the rows that move) is within it.
         let lone = yaw_only(22.7, 28.7).unwrap();
+        assert_eq!(lone.level, Level::Problem);
+        assert!(
+            lone.message.contains("the fit bridges it"),
+            "{}",
+            lone.message
+        );
         assert!(
             lone.message.contains("elsewhere it reads zero on 0.0 %"),
             "{}",
