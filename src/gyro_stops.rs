@@ -24,9 +24,9 @@
 //!
 //! Other runs of zeros are left undecided (`kind: None`): `gyropath check`
 //! then asks the GPS course whether the vehicle turned through them. The
-//! fit bridges each decided stop (`effects::gyro_stops`): the rates inside
-//! it are interpolated between the readings either side, as across a gap
-//! in the log, and the turn across it is a free parameter.
+//! fit bridges each decided stop (`effects::gyro_stops`): the yaw rates
+//! inside it are interpolated between the readings either side, as across
+//! a gap in the log, and the turns across it are free parameters.
 
 /// Shortest run of repeated readings (s, rows) that can be a stop.
 pub const MIN_STOP_S: f64 = 1.0;
@@ -118,8 +118,15 @@ fn repeated_readings(t: &[f64], reading: &impl Fn(usize) -> [f64; 3]) -> Vec<(us
         runs.push((start, j - 1));
         start = j;
     }
-    let mut spans: Vec<f64> = runs.iter().map(|&(a, b)| t[b] - t[a]).collect();
-    let typical = crate::statistics::quantile(&mut spans, 0.95);
+    // A live gyro's runs are single rows (span 0) but for a few: the
+    // percentile is then 0 without sorting a run per row.
+    let single = runs.iter().filter(|&&(a, b)| a == b).count();
+    let typical = if (0.95 * runs.len() as f64).ceil() as usize <= single {
+        0.0
+    } else {
+        let mut spans: Vec<f64> = runs.iter().map(|&(a, b)| t[b] - t[a]).collect();
+        crate::statistics::quantile(&mut spans, 0.95)
+    };
     let shortest = MIN_STOP_S.max(STOP_PER_TYPICAL * typical);
     runs.retain(|&(a, b)| b - a + 1 >= MIN_STOP_ROWS && t[b] - t[a] >= shortest);
     runs

@@ -88,6 +88,25 @@ fn gnss_speed_model() -> Model {
     m
 }
 
+/// A 3D ride whose gyro stopped twice (one stop in three pieces, one in
+/// one), with `gyro_scale` chained before `gyro_stops` at the gyro site.
+fn gyro_stops_model() -> Model {
+    let mut sig = crate::testing::simulated_signals(5, 60.0, &[]);
+    sig.gyro_stops = vec![(12.0, 17.5), (40.003, 41.0)];
+    let spec = ModelSpec {
+        effects: vec!["paper".into(), "gyro_scale".into()],
+        segment_s: 7.0,
+        ..ModelSpec::default()
+    };
+    let m = Model::new(Arc::new(sig), spec).unwrap();
+    assert!(
+        m.effect_index("gyro_stops").is_some(),
+        "{:?}",
+        m.effect_ids()
+    );
+    m
+}
+
 /// A parameter vector away from the start so every term is non-trivial; the
 /// lag is set so that fixes are interpolated inside steps, away from row times.
 fn perturbed(m: &Model) -> Vec<f64> {
@@ -110,6 +129,7 @@ fn models() -> Vec<Model> {
         catalogue_model_with(Some(45.0)),
         catalogue_model_with_noise(Some(45.0), 1.5),
         gnss_speed_model(),
+        gyro_stops_model(),
     ]
 }
 
