@@ -273,6 +273,18 @@ pub(super) fn summary_text(r: &FitReport, verbose: bool) -> String {
             _ = writeln!(out, "{effect}: {n} segments (see --json)");
             continue;
         }
+        if effect == "gyro_stops" {
+            let stops = values
+                .iter()
+                .filter(|p| p.name.starts_with("turn_x"))
+                .count();
+            _ = writeln!(
+                out,
+                "{effect}: {stops} stop(s) of the gyro bridged by {} free turns (see --json)",
+                values.len()
+            );
+            continue;
+        }
         let list: Vec<String> = values
             .iter()
             .map(|p| format!("{} {}", p.name, p.describe()))
