@@ -42,6 +42,17 @@ fn horizontal_rms(a: impl Iterator<Item = (Vector3<f64>, Vector3<f64>)>) -> f64 
     (s / n as f64).sqrt()
 }
 
+/// `gyropath diagnose` of `sig` with the default settings and folds.
+fn diagnosed(sig: Arc<Signals>) -> gyropath::diagnosis::Diagnosis {
+    gyropath::diagnosis::diagnose(
+        sig,
+        &FitSettings::default(),
+        &gyropath::diagnosis::Folds::default(),
+        &|_: &str| {},
+    )
+    .expect("diagnose")
+}
+
 #[test]
 fn paper_model_recovers_the_yaw_bias_and_beats_the_raw_fixes() {
     let log = load_file(&data("ride.csv")).expect("load");
@@ -108,13 +119,7 @@ fn paper_model_recovers_the_yaw_bias_and_beats_the_raw_fixes() {
 fn diagnose_runs_on_a_one_minute_drive_and_points_at_the_gps_latency() {
     let log = load_file(&data("ride.csv")).expect("load");
     let sig = Arc::new(Signals::from_log(&log).expect("signals"));
-    let d = gyropath::diagnosis::diagnose(
-        sig,
-        &FitSettings::default(),
-        &gyropath::diagnosis::Folds::default(),
-        &|_: &str| {},
-    )
-    .expect("diagnose");
+    let d = diagnosed(sig);
     assert!(
         d.folds.block_s < 10.0,
         "blocks fitted to the minute: {:?}",
@@ -172,13 +177,7 @@ fn a_gyro_that_stops_answering_for_ten_seconds_is_bridged() {
         // Diagnosed, the GPS latency is still what is missing: the fixes
         // inside the stop are not scored (their predictions are how the
         // free turns were drawn without them).
-        let d = gyropath::diagnosis::diagnose(
-            sig,
-            &FitSettings::default(),
-            &gyropath::diagnosis::Folds::default(),
-            &|_: &str| {},
-        )
-        .expect("diagnose");
+        let d = diagnosed(sig);
         let best = &d.ranking[0];
         eprintln!("held {held}: {} {:+.1} %", best.effect, 100.0 * best.drop);
         assert_eq!(best.effect, "gps_lag", "held {held}");
