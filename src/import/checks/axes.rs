@@ -111,34 +111,25 @@ pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64) {
     (beta, 1.0 - ssr / syy)
 }
 
+/// An angle (deg) wrapped into -180..180.
+pub(super) fn wrap_deg(a: f64) -> f64 {
+    (a + 540.0).rem_euclid(360.0) - 180.0
+}
+
 /// The axis whose integrated rate follows the GPS course, and beta.
 pub(super) fn course_vertical(
     fixes: &[AtFix],
     stretches: &Stretches,
     report: &mut CheckReport,
 ) -> Option<(AxisFinding, f64)> {
-    let course = |a: usize, b: usize| {
-        let (p, q) = (&fixes[a], &fixes[b]);
-        let (de, dn) = (q.en[0] - p.en[0], q.en[1] - p.en[1]);
-        ((de * de + dn * dn).sqrt(), dn.atan2(de).to_degrees())
-    };
     let (mut dc, mut dt) = (Vec::new(), Vec::new());
     let mut turns: [Vec<f64>; 3] = Default::default();
-    // A chord shorter than half the road the odometer measured along it is
-    // no straight line (set along the GPS track, every chord is taken).
-    let curved = |len: f64, a: usize, b: usize| {
-        stretches
-            .odometer_per_m
-            .is_some_and(|per_m| len < 0.5 * (fixes[b].s - fixes[a].s) / per_m)
-    };
     for w in stretches.idx.windows(3) {
-        let (len1, c1) = course(w[0], w[1]);
-        let (len2, c2) = course(w[1], w[2]);
-        // Straight-line stretches: the chord's course is the heading halfway along.
-        if curved(len1, w[0], w[1]) || curved(len2, w[1], w[2]) {
+        let course = |a: usize, b: usize| stretches.course(&fixes[w[a]], &fixes[w[b]]);
+        let (Some(c1), Some(c2)) = (course(0, 1), course(1, 2)) else {
             continue;
-        }
-        let d = (c2 - c1 + 540.0).rem_euclid(360.0) - 180.0;
+        };
+        let d = wrap_deg(c2 - c1);
         if d.abs() > 120.0 {
             continue;
         }

@@ -169,13 +169,7 @@ fn course_missed(
     (fixes, stretches): (&[AtFix], &Stretches),
     vertical: Option<(usize, f64)>,
 ) -> Option<f64> {
-    let per_m = stretches.odometer_per_m?;
-    let length = stretches.length_m * per_m;
-    let course = |a: &AtFix, b: &AtFix| {
-        let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
-        let straight = de.hypot(dn) >= 0.5 * (b.s - a.s) / per_m;
-        straight.then(|| dn.atan2(de).to_degrees())
-    };
+    let length = stretches.length_m * stretches.odometer_per_m?;
     let (ta, tb) = (log.t_s[first], log.t_s[last]);
     let ka = fixes.iter().rposition(|f| f.t <= ta)?;
     let kb = fixes.iter().position(|f| f.t >= tb)?;
@@ -183,12 +177,13 @@ fn course_missed(
         .rev()
         .find(|&k| fixes[ka].s - fixes[k].s >= length)?;
     let kb1 = (kb + 1..fixes.len()).find(|&k| fixes[k].s - fixes[kb].s >= length)?;
-    let turned = course(&fixes[kb], &fixes[kb1])? - course(&fixes[ka0], &fixes[ka])?;
+    let turned =
+        stretches.course(&fixes[kb], &fixes[kb1])? - stretches.course(&fixes[ka0], &fixes[ka])?;
     let gyro = |a: usize| {
         0.5 * (fixes[kb].turn[a] + fixes[kb1].turn[a] - fixes[ka0].turn[a] - fixes[ka].turn[a])
     };
     // The course is known modulo a full turn.
-    let off = |x: f64| ((x + 540.0).rem_euclid(360.0) - 180.0).abs();
+    let off = |x: f64| super::axes::wrap_deg(x).abs();
     Some(match vertical {
         Some((axis, sign)) => off(turned - sign * gyro(axis)),
         None => (0..3)

@@ -76,6 +76,21 @@ pub(super) struct Stretches {
     pub(super) odometer_per_m: Option<f64>,
 }
 
+impl Stretches {
+    /// The course (deg, anticlockwise from east) of the chord from fix `a`
+    /// to fix `b`, where it is a straight line: no shorter than half the
+    /// road the odometer measured along it (set along the GPS track, every
+    /// chord is taken). A straight chord's course is the heading halfway
+    /// along.
+    pub(super) fn course(&self, a: &AtFix, b: &AtFix) -> Option<f64> {
+        let (de, dn) = (b.en[0] - a.en[0], b.en[1] - a.en[1]);
+        let curved = self
+            .odometer_per_m
+            .is_some_and(|per_m| de.hypot(dn) < 0.5 * (b.s - a.s) / per_m);
+        (!curved).then(|| dn.atan2(de).to_degrees())
+    }
+}
+
 /// Stretches of the track: fixes at least [`stretch_m`] apart along the
 /// odometer.
 ///
@@ -132,13 +147,17 @@ fn over_stretches(fixes: &[AtFix], idx: &[usize]) -> (f64, f64) {
 /// Indices of fixes at least `length` (m) apart along the GPS track (each
 /// from the last one taken, in a straight line).
 fn stretches_along_track(fixes: &[AtFix], length: f64) -> Vec<usize> {
+    stretches_by(fixes, length, |a, b| {
+        (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1])
+    })
+}
+
+/// Indices of fixes at least `length` apart by `apart(from, to)`, each from
+/// the last one taken, the first fix first.
+fn stretches_by(fixes: &[AtFix], length: f64, apart: impl Fn(&AtFix, &AtFix) -> f64) -> Vec<usize> {
     let mut idx: Vec<usize> = Vec::new();
     for (k, f) in fixes.iter().enumerate() {
-        let far = idx.last().is_none_or(|&i| {
-            let a = &fixes[i];
-            (f.en[0] - a.en[0]).hypot(f.en[1] - a.en[1]) >= length
-        });
-        if far {
+        if idx.last().is_none_or(|&i| apart(&fixes[i], f) >= length) {
             idx.push(k);
         }
     }
@@ -183,16 +202,8 @@ fn scatter_m(fixes: &[AtFix]) -> f64 {
 }
 
 /// Indices of fixes at least `length` (m) apart along the odometer.
-pub(super) fn stretches_of(fixes: &[AtFix], length: f64) -> Vec<usize> {
-    let mut idx = Vec::new();
-    let mut last = f64::NEG_INFINITY;
-    for (k, f) in fixes.iter().enumerate() {
-        if f.s - last >= length || idx.is_empty() {
-            idx.push(k);
-            last = f.s;
-        }
-    }
-    idx
+fn stretches_of(fixes: &[AtFix], length: f64) -> Vec<usize> {
+    stretches_by(fixes, length, |a, b| b.s - a.s)
 }
 
 /// Stretches for the odometer and course checks are at least this many
