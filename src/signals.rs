@@ -127,6 +127,9 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<(String, [(f64, f64); 2])
 ///   39 m from the reference against 17 m along the line.
 /// - About x and y, the log's median rate: a vehicle's roll and pitch come
 ///   back to where they were, so over a stop they turn by the bias alone.
+///   (`effects::gyro_stops` replaces these with its own roll and pitch
+///   turns; they are what the start guess, and a fit without the effect,
+///   integrate.)
 ///   The line between the readings either side rolled a simulated bicycle,
 ///   caught leaning into a bend at the stop's start and out of it at its
 ///   end, by tens of degrees over a 15 s stop, and the fit failed 75 m from
@@ -232,8 +235,9 @@ pub struct Signals {
     /// (comma2k19: every signal and its reference pose run on that clock).
     pub t0_boot_s: Option<f64>,
     /// Where the gyro stopped answering (see [`crate::gyro_stops`]): the
-    /// times `(t_a, t_b)` whose steps `t_a < t_j <= t_b` carry rates
-    /// interpolated between the readings either side, and whose turn
+    /// times `(t_a, t_b)` whose steps `t_a < t_j <= t_b` carry a yaw rate
+    /// interpolated between the readings either side and the log's median
+    /// roll and pitch rates (see `bridge_stops`), and whose turns
     /// `effects::gyro_stops` fits.
     pub gyro_stops: Vec<(f64, f64)>,
     /// Per row, the spread (m^2) of the distance inside the GNSS-speed gaps

@@ -1,18 +1,19 @@
-//! `gyro_stops`: the turn across each stretch where the gyro stopped
-//! answering (3 parameters per stop, deg: about x, y and z). Added by itself
-//! where the log has such a stop, as `gnss_gaps` comes with the GNSS
-//! speed's gaps (`-gyro_stops` takes it out).
+//! `gyro_stops`: the turns across each stretch where the gyro stopped
+//! answering (deg: per stop one about x and one about y, and one about z per
+//! piece of at most [`PIECE_S`]). Added by itself where the log has such a
+//! stop, as `gnss_gaps` comes with the GNSS speed's gaps (`-gyro_stops`
+//! takes it out).
 //!
 //! A logger that loses its IMU writes zeros or the last reading on every
 //! row (see [`crate::gyro_stops`]); what the vehicle turned through there
 //! is unknown. The signals set the yaw rates of the stop's steps to the line
 //! between the readings either side ([`crate::signals::Signals::gyro_stops`]),
-//! and this effect spreads the turn `c_g` evenly over the stop's time
-//! `T_g = t_b - t_a`, about z on top of that line, about x and y in place
-//! of the rates as read:
+//! and this effect spreads each turn evenly over its time: piece `k`'s
+//! `c_k,z` over its `T_k` about z on top of that line, stop `g`'s `c_g,x`
+//! and `c_g,y` over its `T_g = t_b - t_a` in place of the rates as read:
 //!
-//! `omega'_j = (c_g,x w_j / T_g, c_g,y w_j / T_g, omega_j,z + c_g,z w_j / T_g)`,
-//! `d omega'_j / d c_g,a = e_a w_j / T_g`, `d omega'_j / d omega_j = diag(0, 0, 1)`
+//! `omega'_j = (c_g,x w_j / T_g, c_g,y w_j / T_g, omega_j,z + c_k,z w_j / T_k)`,
+//! `d omega'_j / d omega_j = diag(0, 0, 1)`
 //!
 //! for the steps that overlap the stop, `w_j` the share of step `j` inside
 //! it (1 on the log's own rows; a step of the coarse ride that straddles an
@@ -20,17 +21,18 @@
 //! checks say which axis is up), the yaw of a planar ride, whose roll and
 //! pitch are held. Roll and pitch are free as well on a 3D ride: the road's
 //! grade changes over a stop, and the comma minute's heights, with them
-//! held at no turn over a 10 s stop, ended 3.7 m off its reference (1.2 m
+//! held at no turn over a 10 s stop, ended 3.7 m off its reference (1.3 m
 //! with the turn free), and with the log's median rate there 1.5 m.
 //!
 //! The fit starts about z from the turn the fixes around the stop tell
-//! (see [`turn_from_fixes`]), else from no turn across it: from the turn
+//! (see [`turn_from_fixes`]), shared among its pieces by their length,
+//! else from no turn across it: from the turn
 //! the interpolated rates make, Berlin's yaw rate held for 25 s after a
 //! bend at -27 deg/s started 420 deg off, and simulated bicycles with
 //! 200 deg in a 15 s stop ended in other minima.
 //!
-//! Priors: about z, `c_g,z + turned_g ~ N(0, (min(90 deg/s T_g,
-//! 180 deg))^2)`, no turn through the rates as read (`turned_g`): a vehicle
+//! Priors: about z, `c_k,z + turned_k ~ N(0, (min(90 deg/s T_k,
+//! 180 deg))^2)`, no turn through the rates as read (`turned_k`): a vehicle
 //! turns at most some 90 deg/s, and a stop that no fix follows (at a ride's
 //! end) turns nothing; about x and y, `N(0, (20 deg)^2)`: a vehicle's
 //! attitude comes back, a bicycle's lean may differ by tens of degrees
