@@ -33,6 +33,19 @@
 //! most of the log's fixes do ([`held`]): then only the rows where the value
 //! changes are fixes, at the row where it first appears. A receiver that
 //! repeats its fix while standing (the Husky robot's, 7 of 988) keeps them.
+//!
+//! And a receiver's stale repeats: many receivers, and the apps and
+//! converters behind them, go on writing the last fix they had once they
+//! lose the sky, a new row a second with the old position, where others
+//! leave the rows empty. Read as fixes, they say the vehicle stood while its
+//! odometer drove on: ten seconds of them on the comma car drive took its
+//! path from 1.25 m to 17 m off the reference (the noise search read a 57 m
+//! wander into the ride to fit them), reported as a success. A run of fixes
+//! equal to the bit to the one that starts it is stale when the distance
+//! signal moves more than [`STALE_MOVED_M`] over it ([`stale`]): no working
+//! receiver repeats a fix to the bit across that much road. Its repeats are
+//! left out (an outage); the run's first fix, the last one the receiver had,
+//! is kept.
 
 use crate::geodesy::{Geodetic, LocalFrame};
 use crate::statistics::median;
@@ -49,6 +62,14 @@ pub const SLACK_M: f64 = 200.0;
 /// the longest is kept.
 const LOOK_BACK: usize = 256;
 
+/// How far the vehicle must move (m, by its distance signal) across a run
+/// of fixes equal to the bit for the run to be a receiver's stale repeats:
+/// more than a fix written with four decimals of a degree moves between
+/// roundings (11 m north, less east: 13.4 m on the diagonal) and a receiver's
+/// static hold, which freezes the fix of a vehicle crawling at walking pace
+/// for a few metres.
+pub const STALE_MOVED_M: f64 = 20.0;
+
 /// The fixes of a ride that are left out: a logger's held repeats, then blunders.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Blunders {
@@ -56,6 +77,12 @@ pub struct Blunders {
     pub rows: Vec<usize>,
     /// How many of them are a logger's held repeats of the fix before (see [`held`]).
     pub held: usize,
+    /// How many of them are a receiver's stale repeats while the vehicle
+    /// moves (see [`stale`]).
+    pub stale: usize,
+    /// The longest run of stale repeats: its first and last repeat's rows
+    /// and how far the vehicle moved from the run's first fix (m).
+    pub stale_longest: Option<(usize, usize, f64)>,
     /// How many rows of the log have a fix, before any is left out.
     pub logged: usize,
     /// How many of the blunders are at `0, 0`.
@@ -79,6 +106,12 @@ impl Blunders {
     /// What a user is told, naming the first blunder's line and time; `None`
     /// when nothing is left out.
     pub fn describe(&self, file: &str, line: &[u64], t: &[f64]) -> Option<String> {
+        let said = self.sentences(line, t);
+        (!said.is_empty()).then(|| format!("{file}: {}", said.join("; ")))
+    }
+
+    /// What [`Blunders::describe`] says, one clause per kind, without the file.
+    pub fn sentences(&self, line: &[u64], t: &[f64]) -> Vec<String> {
         let mut said = Vec::new();
         if self.held > 0 {
             said.push(format!(
@@ -88,7 +121,22 @@ impl Blunders {
                 self.logged - self.held
             ));
         }
-        let n = self.rows.len() - self.held;
+        if let Some((a, b, moved)) = self.stale_longest.filter(|_| self.stale > 0) {
+            let at = |row: usize| {
+                (
+                    line.get(row).copied().unwrap_or(row as u64 + 1),
+                    t.get(row).copied().unwrap_or(f64::NAN),
+                )
+            };
+            let ((line_a, t_a), (_, t_b)) = (at(a), at(b));
+            said.push(format!(
+                "{} GPS fix{} repeat{} the fix before to the bit while the vehicle moves on (the longest run from line {line_a}, t = {t_a:.2} s to {t_b:.2} s, over {moved:.0} m of distance): a receiver that lost its fix and wrote its last one again; they are left out, as an outage",
+                self.stale,
+                if self.stale == 1 { "" } else { "es" },
+                if self.stale == 1 { "s" } else { "" },
+            ));
+        }
+        let n = self.rows.len() - self.held - self.stale;
         if let Some(first) = self.first.filter(|_| n > 0) {
             let far = n - self.null_island;
             let mut what = Vec::new();
@@ -113,7 +161,7 @@ impl Blunders {
                 t.get(first).copied().unwrap_or(f64::NAN),
             ));
         }
-        (!said.is_empty()).then(|| format!("{file}: {}", said.join("; ")))
+        said
     }
 }
 
@@ -143,6 +191,55 @@ pub fn held(fix: &[Option<(f64, f64)>]) -> Vec<usize> {
     }
 }
 
+/// Runs of a receiver's stale repeats among the fixes `fix` (by row; the
+/// rows in `skip`, a logger's held repeats, passed over), by the per-step
+/// distance `step_m` (negative reversing): each run as the rows of its
+/// repeats (not its first fix, which the receiver had) and how far the
+/// vehicle moved from the first fix by the last repeat (m). A run is the
+/// fixes equal to the bit to the one before them; it is stale when the
+/// distance moves more than [`STALE_MOVED_M`] between its first fix and
+/// any repeat.
+pub fn stale(fix: &[Option<(f64, f64)>], skip: &[usize], step_m: &[f64]) -> Vec<(Vec<usize>, f64)> {
+    let mut travelled = 0.0;
+    let mut at = vec![0.0; fix.len()];
+    for (j, a) in at.iter_mut().enumerate() {
+        travelled += step_m
+            .get(j)
+            .copied()
+            .filter(|d| d.is_finite())
+            .unwrap_or(0.0);
+        *a = travelled;
+    }
+    let mut runs = Vec::new();
+    // The run so far: its first fix's row and bits, its repeats.
+    let mut run: Option<(usize, (u64, u64), Vec<usize>)> = None;
+    let mut close = |run: Option<(usize, (u64, u64), Vec<usize>)>| {
+        if let Some((first, _, repeats)) = run {
+            let moved = repeats
+                .iter()
+                .map(|&r| (at[r] - at[first]).abs())
+                .fold(0.0, f64::max);
+            if moved > STALE_MOVED_M {
+                runs.push((repeats, moved));
+            }
+        }
+    };
+    let mut skipped = skip.iter().peekable();
+    for (row, f) in fix.iter().enumerate() {
+        let Some((lat, lon)) = *f else { continue };
+        if skipped.next_if_eq(&&row).is_some() {
+            continue;
+        }
+        let bits = (lat.to_bits(), lon.to_bits());
+        match &mut run {
+            Some((_, b, repeats)) if *b == bits => repeats.push(row),
+            _ => close(run.replace((row, bits, Vec::new()))),
+        }
+    }
+    close(run);
+    runs
+}
+
 /// A fix as the screen sees it: its row, time, east and north (m) in the
 /// local frame at the fixes' median and its own accuracy (m, 0 when not
 /// logged).
@@ -160,14 +257,30 @@ fn reachable(a: &Point, b: &Point) -> bool {
 }
 
 /// The blunders among the fixes `fix` (by row, `None` where a row has none)
-/// at times `t`, with the receiver's accuracy `hacc` where logged.
-pub fn find(t: &[f64], fix: &[Option<(f64, f64)>], hacc: Option<&[Option<f64>]>) -> Blunders {
-    let held_rows = held(fix);
+/// at times `t`, with the receiver's accuracy `hacc` where logged, and the
+/// stale repeats (see [`stale`]) where the log has a distance (`step_m`,
+/// per step).
+pub fn find(
+    t: &[f64],
+    fix: &[Option<(f64, f64)>],
+    hacc: Option<&[Option<f64>]>,
+    step_m: Option<&[f64]>,
+) -> Blunders {
+    let mut repeat_rows = held(fix);
+    let stale_runs = step_m.map_or_else(Vec::new, |d| stale(fix, &repeat_rows, d));
+    let stale_longest = stale_runs
+        .iter()
+        .max_by_key(|(rows, _)| rows.len())
+        .and_then(|(rows, moved)| Some((*rows.first()?, *rows.last()?, *moved)));
+    let stale_count: usize = stale_runs.iter().map(|(rows, _)| rows.len()).sum();
+    let held = repeat_rows.len();
+    repeat_rows.extend(stale_runs.into_iter().flat_map(|(rows, _)| rows));
+    repeat_rows.sort_unstable();
     let is_null = |lat: f64, lon: f64| lat.abs() < 1e-9 && lon.abs() < 1e-9;
     let mut null_rows = Vec::new();
     let mut raw = Vec::new();
     let mut logged = 0;
-    let mut next_held = held_rows.iter().peekable();
+    let mut next_held = repeat_rows.iter().peekable();
     for (row, f) in fix.iter().enumerate() {
         if let Some((lat, lon)) = *f {
             logged += 1;
@@ -227,12 +340,13 @@ pub fn find(t: &[f64], fix: &[Option<(f64, f64)>], hacc: Option<&[Option<f64>]>)
         }
     }
     let first = rows.iter().copied().min();
-    let held = held_rows.len();
-    rows.extend(held_rows);
+    rows.extend(repeat_rows);
     rows.sort_unstable();
     Blunders {
         rows,
         held,
+        stale: stale_count,
+        stale_longest,
         logged,
         null_island: null_rows.len(),
         farthest_m,
@@ -293,7 +407,7 @@ mod tests {
     #[test]
     fn a_clean_ride_has_no_blunder() {
         let (t, fix) = ride(300);
-        assert!(find(&t, &fix, None).is_empty());
+        assert!(find(&t, &fix, None, None).is_empty());
     }
 
     #[test]
@@ -309,7 +423,7 @@ mod tests {
         }
         // A 70 m reflection is the robust loss's, not a blunder.
         fix[250] = fix[250].map(|(la, lo)| (la + 70.0 / 111_320.0, lo));
-        let b = find(&t, &fix, None);
+        let b = find(&t, &fix, None, None);
         assert_eq!(b.rows, vec![0, 50, 100, 200, 201, 202, 203, 204]);
         assert_eq!(b.null_island, 2);
         assert!((b.farthest_m - 3340.0).abs() < 30.0, "{}", b.farthest_m);
@@ -330,7 +444,7 @@ mod tests {
         let (t, fix) = ride(30);
         let rows_t: Vec<f64> = (0..300).map(|k| k as f64 / 10.0).collect();
         let mut held_fix: Vec<_> = (0..300).map(|k| fix[k / 10]).collect();
-        let b = find(&rows_t, &held_fix, None);
+        let b = find(&rows_t, &held_fix, None, None);
         assert_eq!(b.held, 270);
         assert_eq!(b.rows.len(), 270);
         assert!((0..300).all(|k| b.contains(k) != (k % 10 == 0)));
@@ -343,20 +457,86 @@ mod tests {
         for f in &mut held_fix[150..160] {
             *f = Some((0.0, 0.0));
         }
-        let b = find(&rows_t, &held_fix, None);
+        let b = find(&rows_t, &held_fix, None, None);
         assert_eq!((b.held, b.null_island, b.first), (270, 1, Some(150)));
         // A receiver that repeats a fix now and then keeps its repeats.
         let mut fix = fix;
         fix[5] = fix[4];
         fix[6] = fix[4];
-        assert!(find(&t, &fix, None).is_empty());
+        assert!(find(&t, &fix, None, None).is_empty());
+    }
+
+    /// A receiver that lost its fix and wrote its last one again for ten
+    /// seconds while the car drove on 10 m/s: the ten repeats are left out
+    /// and said, the fix it had kept; the same repeats while the car stands,
+    /// or while it crawls under [`STALE_MOVED_M`], are the receiver's and stay.
+    #[test]
+    fn a_receivers_stale_fixes_while_moving_are_left_out() {
+        let (t, mut fix) = ride(100);
+        for k in 41..=50 {
+            fix[k] = fix[40];
+        }
+        let step = vec![10.0; 100];
+        let b = find(&t, &fix, None, Some(&step));
+        assert_eq!(b.rows, (41..=50).collect::<Vec<_>>());
+        assert_eq!((b.stale, b.held, b.first), (10, 0, None));
+        let (first, last, moved) = b.stale_longest.unwrap_or_default();
+        assert_eq!((first, last), (41, 50));
+        assert!((moved - 100.0).abs() < 1e-9, "{moved}");
+        let line: Vec<u64> = (0..100).map(|k| k + 3).collect();
+        assert_eq!(
+            b.describe("ride.csv", &line, &t).unwrap_or_default(),
+            "ride.csv: 10 GPS fixes repeat the fix before to the bit while the vehicle moves on (the longest run from line 44, t = 41.00 s to 50.00 s, over 100 m of distance): a receiver that lost its fix and wrote its last one again; they are left out, as an outage"
+        );
+        // Without a distance the repeats cannot be told from a stand.
+        assert!(find(&t, &fix, None, None).is_empty());
+        // Standing through them, or crawling 18 m, they stay.
+        let mut standing = step.clone();
+        standing[41..=50].fill(0.0);
+        assert!(find(&t, &fix, None, Some(&standing)).is_empty());
+        standing[41..=50].fill(1.8);
+        assert!(find(&t, &fix, None, Some(&standing)).is_empty());
+        // Reversing counts as moving.
+        standing[41..=50].fill(-2.5);
+        assert_eq!(find(&t, &fix, None, Some(&standing)).stale, 10);
+        // Two runs, and a blunder beside them.
+        fix[80] = Some((0.0, 0.0));
+        fix[91] = fix[90];
+        fix[92] = fix[90];
+        fix[93] = fix[90];
+        let b = find(&t, &fix, None, Some(&step));
+        assert_eq!((b.stale, b.null_island, b.first), (13, 1, Some(80)));
+        assert_eq!(b.rows.len(), 14);
+        let text = b.describe("ride.csv", &line, &t).unwrap_or_default();
+        assert!(
+            text.contains("13 GPS fixes repeat") && text.contains("1 GPS fix left out as blunder"),
+            "{text}"
+        );
+    }
+
+    /// A logger that writes the last fix on every row, behind a receiver
+    /// that holds its fix: the held rows are one fix each as before, and the
+    /// receiver's stale seconds among what changes are then no change at all
+    /// (an outage already).
+    #[test]
+    fn stale_fixes_behind_a_loggers_held_fix_are_an_outage() {
+        let (_, mut fix) = ride(30);
+        for k in 11..=15 {
+            fix[k] = fix[10];
+        }
+        let rows_t: Vec<f64> = (0..300).map(|k| k as f64 / 10.0).collect();
+        let held_fix: Vec<_> = (0..300).map(|k| fix[k / 10]).collect();
+        let step = vec![1.0; 300];
+        let b = find(&rows_t, &held_fix, None, Some(&step));
+        assert_eq!((b.held, b.stale), (275, 0));
+        assert!((0..300).all(|k| b.contains(k) != (k % 10 == 0 && !(110..=150).contains(&k))));
     }
 
     #[test]
     fn a_wrong_first_fix_is_left_out_not_the_ride() {
         let (t, mut fix) = ride(100);
         fix[0] = fix[0].map(|(la, lo)| (la + 0.5, lo + 0.5));
-        assert_eq!(find(&t, &fix, None).rows, vec![0]);
+        assert_eq!(find(&t, &fix, None, None).rows, vec![0]);
     }
 
     #[test]
@@ -370,17 +550,17 @@ mod tests {
             .iter()
             .map(|&s| Some((47.5 + 50.0 * s / 111_320.0, 19.05)))
             .collect();
-        assert!(find(&t, &fix, None).is_empty());
+        assert!(find(&t, &fix, None, None).is_empty());
     }
 
     #[test]
     fn a_fix_the_receiver_calls_poor_is_not_a_blunder() {
         let (t, mut fix) = ride(100);
         fix[40] = fix[40].map(|(la, lo)| (la + 500.0 / 111_320.0, lo));
-        assert_eq!(find(&t, &fix, None).rows, vec![40]);
+        assert_eq!(find(&t, &fix, None, None).rows, vec![40]);
         let mut hacc = vec![Some(3.0); 100];
         hacc[40] = Some(200.0);
-        assert!(find(&t, &fix, Some(&hacc)).is_empty());
+        assert!(find(&t, &fix, Some(&hacc), None).is_empty());
     }
 
     #[test]
@@ -395,8 +575,8 @@ mod tests {
                 ))
             })
             .collect();
-        assert!(find(&t, &fix, None).is_empty());
+        assert!(find(&t, &fix, None, None).is_empty());
         fix[30] = fix[30].map(|(la, lo)| (la, lo + 0.1));
-        assert_eq!(find(&t, &fix, None).rows, vec![30]);
+        assert_eq!(find(&t, &fix, None, None).rows, vec![30]);
     }
 }

@@ -563,7 +563,12 @@ impl Signals {
         if let Some(w) = jumps.describe(&file, &log.line, &t) {
             warnings.push(w);
         }
-        let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
+        let blunders = crate::blunders::find(
+            &log.t_s,
+            &log.fix,
+            log.gps_hacc_m.as_deref(),
+            Some(&distance),
+        );
         if let Some(w) = blunders.describe(&file, &log.line, &t) {
             warnings.push(w);
         }
@@ -623,9 +628,15 @@ impl Signals {
             }
         }
         if fixes.len() < 2 {
+            let left_out = blunders.sentences(&log.line, &t);
             return Err(unusable(format!(
-                "the log has {} GPS fix; at least two are needed",
-                fixes.len()
+                "the log has {} GPS fix; at least two are needed{}",
+                fixes.len(),
+                if left_out.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", left_out.join("; "))
+                }
             )));
         }
         let has_gps_alt = fixes.iter().any(|f| f.up.is_some());

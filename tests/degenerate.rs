@@ -73,18 +73,32 @@ fn refusal(csv: &str) -> String {
     }
 }
 
+/// Every fix in one spot: where the odometer stands too, the heading is
+/// unobservable; where it moves on, the receiver never had a fix and wrote
+/// one position again and again, and the refusal says so.
 #[test]
 fn all_fixes_in_one_spot_make_the_heading_unobservable() {
-    let csv = edited(120.0, |_, mut f| {
-        if !f[5].is_empty() {
-            f[5] = "47.5".into();
-            f[6] = "19.05".into();
-        }
-        Some(f)
-    });
-    let msg = refusal(&csv);
+    let one_spot = |moving: bool| {
+        edited(120.0, move |_, mut f| {
+            if !f[5].is_empty() {
+                f[5] = "47.5".into();
+                f[6] = "19.05".into();
+            }
+            if !moving {
+                f[4] = "0".into();
+            }
+            Some(f)
+        })
+    };
+    let msg = refusal(&one_spot(false));
     assert!(
         msg.contains("ride.csv") && msg.contains("heading is unobservable"),
+        "{msg}"
+    );
+    let msg = refusal(&one_spot(true));
+    assert!(
+        msg.contains("ride.csv")
+            && msg.contains("the log has 1 GPS fix; at least two are needed (120 GPS fixes repeat the fix before to the bit while the vehicle moves on"),
         "{msg}"
     );
 }
@@ -204,6 +218,51 @@ fn gross_gps_blunders_are_left_out_as_if_never_logged() {
     assert!(rms < 10.0, "{rms} m from the fixes");
     let said = format!(
         "8 GPS fixes left out as blunders: 3 at 0, 0 (a receiver's placeholder while it has no fix); 5 up to 3.3 km off the track, farther than 100 m/s moves between fixes (the first on line {line}"
+    );
+    assert!(
+        warnings.iter().any(|w| w.contains(&said)),
+        "{warnings:?}\n{said}"
+    );
+    check_says(&with, "GPS blunders", &said);
+}
+
+/// A receiver that loses its fix and writes its last one again, once a
+/// second for ten seconds while the bicycle rides on: the repeats are left
+/// out, and the fit is the fit of the ride logged with those rows empty, to
+/// the digit, and says so on the first repeat's line. Read as fixes, ten
+/// such seconds on the comma car drive took its path from 1.25 m to 17 m
+/// off the reference, reported as a success.
+#[test]
+fn a_receivers_stale_fixes_are_left_out_as_if_never_logged() {
+    let stale = |k: usize| (101..=110).contains(&k);
+    let last: std::cell::RefCell<Vec<String>> = std::cell::RefCell::new(Vec::new());
+    let first_row = std::cell::Cell::new(None);
+    let kept = std::cell::Cell::new(0usize);
+    let with = edited(300.0, |row, mut f| {
+        if !f[5].is_empty() {
+            kept.set(kept.get() + 1);
+            if stale(kept.get()) {
+                if first_row.get().is_none() {
+                    first_row.set(Some(row));
+                }
+                f[5..=7].clone_from_slice(&last.borrow());
+            } else {
+                *last.borrow_mut() = f[5..=7].to_vec();
+            }
+        }
+        Some(f)
+    });
+    let without = keeping_fixes(300.0, |k| !stale(k));
+    let comments = with.lines().take_while(|l| l.starts_with('#')).count();
+    let line = first_row.get().expect("a stale fix") + comments + 2;
+    let (path, rms, warnings) = fitted(&with);
+    let (clean, clean_rms, _) = fitted(&without);
+    let worst = farthest_apart(&path, &clean);
+    assert!(worst < 1e-9, "paths {worst} m apart");
+    assert_eq!(rms, clean_rms);
+    assert!(rms < 10.0, "{rms} m from the fixes");
+    let said = format!(
+        "10 GPS fixes repeat the fix before to the bit while the vehicle moves on (the longest run from line {line}"
     );
     assert!(
         warnings.iter().any(|w| w.contains(&said)),

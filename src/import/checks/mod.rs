@@ -206,8 +206,14 @@ pub fn check(log: &RideLog) -> CheckReport {
     if let Some(w) = jumps.describe(&log.source, &log.line, &log.t_s) {
         report.say("odometer jumps", Level::Warning, w);
     }
-    let distance = distance.map_or_else(|_| vec![0.0; log.len()], |(d, _)| d);
-    let blunders = crate::blunders::find(&log.t_s, &log.fix, log.gps_hacc_m.as_deref());
+    let measured = distance.ok().map(|(d, _)| d);
+    let blunders = crate::blunders::find(
+        &log.t_s,
+        &log.fix,
+        log.gps_hacc_m.as_deref(),
+        measured.as_deref(),
+    );
+    let distance = measured.unwrap_or_else(|| vec![0.0; log.len()]);
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
     }
