@@ -15,7 +15,7 @@ use crate::diagnosis::reference::{self, Matched, ReferenceError};
 use crate::export::FitReport;
 use crate::import::reference::Clock;
 use crate::import::{
-    self, ImportOptions, Imported, LoadError, ReferenceTrack, SourceKind, Topics, Verdict,
+    self, ImportOptions, Imported, Level, LoadError, ReferenceTrack, SourceKind, Topics, Verdict,
 };
 use crate::limits::{self, Violation};
 use crate::model::{Model, Uncertainty};
@@ -198,6 +198,38 @@ pub fn judge(model: &Model, theta: &[f64]) -> Judgement {
 pub fn failure(fit: &Reconstruction) -> Option<String> {
     judge(fit.model(), fit.params())
         .failure(&fit.model().signals.source, fit.stats().rms_horizontal_m)
+}
+
+/// [`failure`], with the axis and unit problems that the checks of the
+/// ride's `origin` found and its mounting left, as the likelier cause: a
+/// gyro in raw counts makes the fit fail with an odometer gain of 2.6 ("the
+/// odometer's units look wrong"), where the gyro's are.
+pub fn failure_given(fit: &Reconstruction, origin: &Origin) -> Option<String> {
+    let message = failure(fit)?;
+    let found: Vec<String> = origin
+        .verdicts
+        .iter()
+        .filter(|v| {
+            v.level == Level::Problem
+                && matches!(
+                    v.subject.as_str(),
+                    "vertical axis" | "forward axis" | "gyro units"
+                )
+        })
+        .map(|v| format!("  {}: {}", v.subject, v.message))
+        .collect();
+    if found.is_empty() {
+        return Some(message);
+    }
+    Some(format!(
+        "{message}\nthe likelier cause is what the checks found in the log's axes or units; mend that first{}:\n{}",
+        origin
+            .recommended
+            .as_ref()
+            .map(|m| format!(" (--mount \"{m}\")"))
+            .unwrap_or_default(),
+        found.join("\n")
+    ))
 }
 
 /// The report of a finished fit: its parameters with their sigmas (and the

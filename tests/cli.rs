@@ -375,6 +375,59 @@ fn check_names_the_mounting_and_a_wrong_topic_lists_the_candidates() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("mirror"));
 }
 
+/// Berlin's yaw rate written as a MEMS gyro's raw counts (131 per deg/s):
+/// the checks name the counts with the scales they can be (the city's GPS
+/// course tells the ratio to +-36 %), and the fit's failure, which on its
+/// own blames the odometer (a gain of 2.6), points at them as the likelier
+/// cause with the mounting that undoes them. With the counts' scale the fit
+/// is Berlin's own.
+#[test]
+fn a_gyro_in_raw_counts_is_named_and_the_fits_failure_points_at_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let ride = dir.path().join("counts.csv");
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/real/smartloc-berlin-potsdamer-platz/ride.csv"
+    ))
+    .unwrap();
+    let mut out = String::new();
+    for line in text.lines() {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        if let Some(gz) = f.get(3).and_then(|v| v.parse::<f64>().ok()) {
+            f[3] = format!("{:.0}", gz * 131.0);
+        }
+        out.push_str(&f.join(","));
+        out.push('\n');
+    }
+    std::fs::write(&ride, out).unwrap();
+    let check = gyropath(&["check", s(&ride)]);
+    let said = String::from_utf8_lossy(&check.stdout);
+    assert!(
+        said.contains("PROBLEM   gyro units")
+            && said.contains(
+                "raw counts of a gyro at +-250 deg/s full scale (131 per deg/s) (scale 0.007634)"
+            )
+            && !said.contains("deg/s logged as rad/s"),
+        "{said}"
+    );
+    let fit = gyropath(&["fit", s(&ride)]);
+    assert!(!fit.status.success());
+    let err = String::from_utf8_lossy(&fit.stderr);
+    assert!(
+        err.contains("the fit failed")
+            && err
+                .contains("the likelier cause is what the checks found in the log's axes or units")
+            && err.contains("  gyro units: the gyro turns"),
+        "{err}"
+    );
+    let fit = gyropath(&["fit", s(&ride), "--mount", "x=x,y=y,z=z,scale=0.0076335878"]);
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+}
+
 #[test]
 fn a_fit_with_wrong_axes_fails_with_its_cause_and_writes_nothing() {
     let dir = tempfile::tempdir().unwrap();

@@ -175,7 +175,7 @@ fn fit_one(
     let against = matched_reference(reference_for(ride, reference).as_deref(), &signals, true)?;
     let mut fit = Reconstruction::new(signals, settings.clone())?;
     fit.finish();
-    physical(&fit)?;
+    physical(&fit, &origin)?;
     let (report, uncertainty) = pipeline::report(
         &fit,
         started.elapsed().as_secs_f64(),

@@ -148,7 +148,7 @@ pub fn fit(args: &FitArgs) -> Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
-    physical(&fit)?;
+    physical(&fit, &origin)?;
     let (mut report, uncertainty) = pipeline::report(
         &fit,
         started.elapsed().as_secs_f64(),

@@ -446,8 +446,8 @@ fn write_report(out: &Path, ride: &Path, report: &impl serde::Serialize) -> Resu
 
 /// A fit beyond the physical limits is a failure, with its likely cause,
 /// never a result (see `gyropath::limits`).
-fn physical(fit: &Reconstruction) -> Result<()> {
-    match pipeline::failure(fit) {
+fn physical(fit: &Reconstruction, origin: &pipeline::Origin) -> Result<()> {
+    match pipeline::failure_given(fit, origin) {
         Some(message) => anyhow::bail!(message),
         None => Ok(()),
     }

@@ -11,17 +11,106 @@ pub(super) fn signed(axis: usize, sign: f64) -> String {
     )
 }
 
-/// The unit factor a course-per-gyro ratio points to, when it is one of the usual mix-ups.
-pub(super) fn unit_factor(beta: f64) -> Option<f64> {
-    let deg = 180.0 / std::f64::consts::PI;
-    let l = beta.abs().log10();
-    if (l - deg.log10()).abs() < 0.5 {
-        Some(deg)
-    } else if (l + deg.log10()).abs() < 0.5 {
-        Some(1.0 / deg)
-    } else {
-        None
+/// The usual mix-ups of a gyro's units, each as the scale that undoes it
+/// (deg/s per logged unit) and what it is: a unit taken for another, or the
+/// chip's raw output written as it comes. Raw counts are the sensitivities
+/// of the common MEMS gyros at their full scales (InvenSense's and Bosch's
+/// 131 per deg/s at +-250 deg/s, halving with each doubling of the range;
+/// ST's 8.75, 17.5, 35 and 70 mdps per count).
+const GYRO_CONFUSIONS: [(f64, &str); 15] = [
+    (DEG_PER_RAD, "rad/s logged as deg/s"),
+    (1.0 / DEG_PER_RAD, "deg/s logged as rad/s"),
+    (
+        0.001,
+        "millidegrees per second (mdps, as ST's drivers give them)",
+    ),
+    (DEG_PER_RAD / 1000.0, "milliradians per second"),
+    (0.01, "hundredths of a deg/s (a CAN signal's raw value)"),
+    (0.1, "tenths of a deg/s (a CAN signal's raw value)"),
+    (
+        1.0 / 262.4,
+        "raw counts of a gyro at +-125 deg/s full scale (262.4 per deg/s)",
+    ),
+    (
+        1.0 / 131.0,
+        "raw counts of a gyro at +-250 deg/s full scale (131 per deg/s)",
+    ),
+    (
+        1.0 / 65.5,
+        "raw counts of a gyro at +-500 deg/s full scale (65.5 per deg/s)",
+    ),
+    (
+        1.0 / 32.8,
+        "raw counts of a gyro at +-1000 deg/s full scale (32.8 per deg/s)",
+    ),
+    (
+        1.0 / 16.4,
+        "raw counts of a gyro at +-2000 deg/s full scale (16.4 per deg/s)",
+    ),
+    (
+        0.00875,
+        "raw counts of an ST gyro at +-250 deg/s (8.75 mdps each)",
+    ),
+    (
+        0.0175,
+        "raw counts of an ST gyro at +-500 deg/s (17.5 mdps each)",
+    ),
+    (
+        0.035,
+        "raw counts of an ST gyro at +-1000 deg/s (35 mdps each)",
+    ),
+    (
+        0.07,
+        "raw counts of an ST gyro at +-2000 deg/s (70 mdps each)",
+    ),
+];
+
+const DEG_PER_RAD: f64 = 180.0 / std::f64::consts::PI;
+
+/// The narrowest band (as a fraction) about a course-per-gyro ratio in
+/// which [`gyro_confusions`] looks: a gyro's scale error and a drive's
+/// course are a few percent off even on a clean ride.
+pub(super) const GYRO_UNIT_TOLERANCE: f64 = 0.06;
+
+/// The unit mix-ups ([`GYRO_CONFUSIONS`]) a course-per-gyro ratio `beta`
+/// (1-sigma `sigma`) can be, nearest first: those within three sigmas, at
+/// least [`GYRO_UNIT_TOLERANCE`] and at most 25 % (beyond which the ratio
+/// reads as deg/s, see [`gyro_units`]) in ratio; of two within 1 % of each
+/// other (deg/s as rad/s and ST's +-500 deg/s counts) the nearer alone, as
+/// their scales are the same to that. Each as the scale that undoes it and
+/// what it is. A ride whose course the GPS tells poorly (the city drive:
+/// R^2 0.34, the ratio 1.22 +- 0.3 with the gyro in deg/s) names every
+/// mix-up within a quarter; a clean one the one it is.
+pub(super) fn gyro_confusions(beta: f64, sigma: f64) -> Vec<(f64, &'static str)> {
+    let b = beta.abs();
+    if !(b.is_finite() && b > 0.0) {
+        return Vec::new();
     }
+    let band = (3.0 * sigma / beta.abs())
+        .clamp(GYRO_UNIT_TOLERANCE, 0.25)
+        .ln_1p();
+    let mut near: Vec<(f64, f64, &str)> = GYRO_CONFUSIONS
+        .iter()
+        .map(|&(scale, what)| ((b / scale).ln().abs(), scale, what))
+        .filter(|&(off, _, _)| off < band)
+        .collect();
+    near.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut kept: Vec<(f64, &str)> = Vec::new();
+    for (_, scale, what) in near {
+        if kept
+            .iter()
+            .all(|&(s, _)| (scale / s).ln().abs() > 0.01f64.ln_1p())
+        {
+            kept.push((scale, what));
+        }
+    }
+    kept
+}
+
+/// The scale that undoes the nearest unit mix-up a course-per-gyro ratio
+/// points to (see [`gyro_confusions`]), if any.
+pub(super) fn unit_factor(beta: f64, sigma: f64) -> Option<f64> {
+    gyro_confusions(beta, sigma).first().map(|&(s, _)| s)
 }
 
 /// Gravity in the accelerometer's mean.
@@ -88,8 +177,10 @@ pub(super) fn accelerometer_vertical(
     })
 }
 
-/// Least squares `y = beta x + b z` (no intercept): (beta, R^2 about zero).
-pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64) {
+/// Least squares `y = beta x + b z` (no intercept): (beta, R^2 about zero,
+/// the 1-sigma of beta from the scatter, `sqrt(s^2 (Z'Z) / det)` with
+/// `s^2 = SSR / (n - 2)`).
+pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64, f64) {
     let (mut sxx, mut sxz, mut szz, mut sxy, mut szy, mut syy) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
     for i in 0..y.len() {
         sxx += x[i] * x[i];
@@ -101,14 +192,19 @@ pub(super) fn fit2(x: &[f64], z: &[f64], y: &[f64]) -> (f64, f64) {
     }
     let det = sxx * szz - sxz * sxz;
     if det.abs() < 1e-300 || syy <= 0.0 {
-        return (0.0, 0.0);
+        return (0.0, 0.0, f64::INFINITY);
     }
     let beta = (sxy * szz - szy * sxz) / det;
     let b = (szy * sxx - sxy * sxz) / det;
     let ssr: f64 = (0..y.len())
         .map(|i| (y[i] - beta * x[i] - b * z[i]).powi(2))
         .sum();
-    (beta, 1.0 - ssr / syy)
+    let dof = y.len().saturating_sub(2).max(1) as f64;
+    (
+        beta,
+        1.0 - ssr / syy,
+        (ssr / dof * szz / det).max(0.0).sqrt(),
+    )
 }
 
 /// An angle (deg) wrapped into -180..180.
@@ -163,11 +259,11 @@ pub(super) fn course_vertical(
         );
         return None;
     }
-    let fits: Vec<(f64, f64)> = (0..3).map(|a| fit2(&turns[a], &dt, &dc)).collect();
+    let fits: Vec<(f64, f64, f64)> = (0..3).map(|a| fit2(&turns[a], &dt, &dc)).collect();
     let axis = (0..3)
         .max_by(|&a, &b| fits[a].1.total_cmp(&fits[b].1))
         .unwrap_or(2);
-    let (beta, r2) = fits[axis];
+    let (beta, r2, sigma) = fits[axis];
     let r = r2.max(0.0).sqrt();
     let others: Vec<String> = (0..3)
         .filter(|&a| a != axis)
@@ -196,6 +292,7 @@ pub(super) fn course_vertical(
         ),
     );
     report.course_per_gyro = Some(beta.abs());
+    report.course_per_gyro_sigma = Some(sigma);
     Some((
         AxisFinding {
             axis,
@@ -207,35 +304,58 @@ pub(super) fn course_vertical(
     ))
 }
 
+/// Whether the gyro is in deg/s, by the GPS course's turn per gyro turn
+/// `beta` on the vertical (1-sigma in the report): within 0.8-1.25 it is;
+/// else the unit mix-ups it can be ([`gyro_confusions`]) are named, each
+/// with the scale that undoes it.
 pub(super) fn gyro_units(beta: f64, vertical: AxisFinding, report: &mut CheckReport) {
     let b = beta.abs();
     let axis = signed(vertical.axis, vertical.sign);
-    match unit_factor(b) {
-        Some(f) if f > 1.0 => report.say(
-            "gyro units",
-            Level::Problem,
-            format!(
-                "the gyro turns {b:.1} times less than the GPS course on {axis}: rad/s logged as deg/s (scale {f:.5})"
-            ),
-        ),
-        Some(f) => report.say(
-            "gyro units",
-            Level::Problem,
-            format!(
-                "the gyro turns {:.1} times more than the GPS course on {axis}: deg/s logged as rad/s (scale {f:.6})",
-                1.0 / b
-            ),
-        ),
-        None if (0.8..=1.25).contains(&b) => report.say(
+    if (0.8..=1.25).contains(&b) {
+        report.say(
             "gyro units",
             Level::Ok,
             format!("deg/s: the course turns {b:.3} deg per gyro degree on {axis}"),
-        ),
-        None => report.say(
+        );
+        return;
+    }
+    let sigma = report.course_per_gyro_sigma.unwrap_or(0.0);
+    let scale = |s: f64| {
+        if s >= 1.0 {
+            format!("{s:.5}")
+        } else {
+            format!("{s:.6}")
+        }
+    };
+    let named: Vec<String> = gyro_confusions(b, sigma)
+        .into_iter()
+        .map(|(s, what)| format!("{what} (scale {})", scale(s)))
+        .collect();
+    let how = if b > 1.0 {
+        format!("the gyro turns {b:.1} times less than the GPS course on {axis}")
+    } else {
+        format!(
+            "the gyro turns {:.1} times more than the GPS course on {axis}",
+            1.0 / b
+        )
+    };
+    match named.len() {
+        0 => report.say(
             "gyro units",
             Level::Warning,
             format!(
-                "the course turns {b:.3} deg per gyro degree on {axis}: neither deg/s nor rad/s; check the units or the scale"
+                "the course turns {b:.3} deg per gyro degree on {axis}: neither deg/s nor a usual mix-up of units (rad/s, mdps, a CAN signal's hundredths, a MEMS gyro's raw counts); check the units or the scale (--mount with scale={})",
+                scale(b)
+            ),
+        ),
+        1 => report.say("gyro units", Level::Problem, format!("{how}: {}", named[0])),
+        _ => report.say(
+            "gyro units",
+            Level::Problem,
+            format!(
+                "{how} (+-{:.0} %, the GPS course tells no closer): {}; the logger's or the gyro's datasheet says which, or a fit at the first scale with `--effects gyro_scale`, whose scale error is what is left",
+                100.0 * sigma / b,
+                named.join(", or ")
             ),
         ),
     }
@@ -334,4 +454,46 @@ pub(super) fn forward_axis(
         r: score / 2.0,
         by: "the accelerometer against the odometer",
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The mix-ups within the ratio's band, nearest first, one of any two
+    /// within 1 %; none near deg/s.
+    #[test]
+    fn gyro_unit_confusions_are_named_within_the_ratios_precision() {
+        let names = |beta: f64, sigma: f64| -> Vec<&str> {
+            gyro_confusions(beta, sigma)
+                .into_iter()
+                .map(|(_, w)| w)
+                .collect()
+        };
+        // Raw counts at +-250 deg/s on a clean ride: that alone.
+        let one = gyro_confusions(1.0 / 131.0, 0.001 / 131.0);
+        assert_eq!(one.len(), 1, "{one:?}");
+        assert!(one[0].1.contains("131 per deg/s"));
+        assert!((one[0].0 - 1.0 / 131.0).abs() < 1e-12);
+        // The same ratio read 13 % off on a city drive (+-36 %): every
+        // mix-up within 25 %, the nearest first.
+        let city = names(1.0 / 113.5, 0.36 / 113.5);
+        assert_eq!(city.len(), 3, "{city:?}");
+        assert!(
+            city[0].contains("8.75 mdps") && city[2].contains("131 per deg/s"),
+            "{city:?}"
+        );
+        // rad/s as deg/s, and deg/s as rad/s (ST's 57.14 counts, 0.3 %
+        // away, not named beside it).
+        assert_eq!(names(57.3, 0.5), vec!["rad/s logged as deg/s"]);
+        assert_eq!(names(1.0 / 57.29, 0.0001), vec!["deg/s logged as rad/s"]);
+        assert_eq!(
+            names(0.00101, 0.00001),
+            vec!["millidegrees per second (mdps, as ST's drivers give them)"]
+        );
+        // Half the course's turn is no usual mix-up; deg/s is none either.
+        assert!(names(2.0, 0.02).is_empty());
+        assert!(names(1.0, 0.02).is_empty());
+        assert!(names(0.0, 0.02).is_empty());
+    }
 }

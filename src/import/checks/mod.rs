@@ -109,6 +109,8 @@ pub struct CheckReport {
     pub forward: Option<AxisFinding>,
     /// GPS course turn per gyro turn on the vertical axis (1 for deg/s as labelled).
     pub course_per_gyro: Option<f64>,
+    /// Its 1-sigma, from the scatter of the course's turns about it.
+    pub course_per_gyro_sigma: Option<f64>,
     /// Odometer distance per GPS track length.
     pub odometer_per_gps: Option<f64>,
 }
@@ -289,7 +291,11 @@ pub fn check(log: &RideLog) -> CheckReport {
             |f| (f.axis, f.sign),
         );
         report.recommended = Mount::from_forward_up(fwd, (v.axis, v.sign)).map(|mut m| {
-            if let Some(s) = report.course_per_gyro.and_then(unit_factor) {
+            if let Some(s) = report
+                .course_per_gyro
+                .filter(|b| !(0.8..=1.25).contains(b))
+                .and_then(|b| unit_factor(b, report.course_per_gyro_sigma.unwrap_or(0.0)))
+            {
                 m.scale = s;
             }
             m
@@ -318,6 +324,53 @@ mod tests {
         assert!((c - 1.0).abs() < 0.1, "{c}");
         let o = r.odometer_per_gps.unwrap();
         assert!((o - 1.0).abs() < 0.05, "{o}");
+    }
+
+    /// A gyro written as raw counts (131 per deg/s), in mdps or at half its
+    /// rate is named for what it is, with the scale that undoes it; before,
+    /// any factor from 18 to 181 read as "deg/s logged as rad/s", and the
+    /// counts were handed a scale 2.3 times off.
+    #[test]
+    fn raw_counts_and_mdps_are_named_with_their_scale() {
+        let scaled = |k: f64| {
+            let mut log = ride();
+            for g in &mut log.gyro_dps {
+                *g = g.map(|w| w * k);
+            }
+            check(&log)
+        };
+        let units = |r: &CheckReport| {
+            r.verdicts
+                .iter()
+                .find(|v| v.subject == "gyro units")
+                .cloned()
+                .unwrap_or_else(|| panic!("{:#?}", r.verdicts))
+        };
+        for (k, named) in [
+            (
+                131.0,
+                "raw counts of a gyro at +-250 deg/s full scale (131 per deg/s)",
+            ),
+            (1000.0, "millidegrees per second"),
+        ] {
+            let r = scaled(k);
+            let v = units(&r);
+            assert_eq!(v.level, Level::Problem, "{v:?}");
+            assert!(
+                v.message.contains(named) && !v.message.contains(", or "),
+                "{k}: {v:?}"
+            );
+            let rec = r.recommended.clone().unwrap_or_else(Mount::identity);
+            assert!((rec.scale * k - 1.0).abs() < 1e-9, "{k}: {rec}");
+        }
+        let r = scaled(0.5);
+        let v = units(&r);
+        assert_eq!(v.level, Level::Warning, "{v:?}");
+        assert!(
+            v.message.contains("neither deg/s nor a usual mix-up"),
+            "{v:?}"
+        );
+        assert_eq!(r.recommended.map(|m| m.scale), Some(1.0));
     }
 
     #[test]
