@@ -398,3 +398,56 @@ fn a_phones_minus_one_speed_is_no_speed() {
     let rms = fit.stats().rms_horizontal_m;
     assert!(rms < 3.0, "rms {rms}");
 }
+
+/// A phone's location file with its coordinates as NMEA writes them
+/// (degrees and minutes run together, 4728.73198 for 47.4788664): every fix
+/// is out of range, and the load fails naming them with their degrees.
+/// Before, it said only "no usable GPS fix while the IMU and the odometer
+/// run"; with some fixes in range, the others are left out with the same words.
+#[test]
+fn coordinates_in_degrees_and_minutes_are_named_as_such() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(mapped("phone-location.csv")).unwrap();
+    let as_nmea = |v: &str| {
+        let x: f64 = v.parse().unwrap();
+        let d = x.abs().trunc();
+        format!(
+            "{}{:.5}",
+            if x < 0.0 { "-" } else { "" },
+            100.0 * d + 60.0 * (x.abs() - d)
+        )
+    };
+    let write = |every: usize| {
+        let mut out = String::new();
+        for (k, line) in text.lines().enumerate() {
+            let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+            if k > 0 && k % every == 0 {
+                f[2] = as_nmea(&f[2]);
+                f[3] = as_nmea(&f[3]);
+            }
+            out.push_str(&f.join(","));
+            out.push('\n');
+        }
+        let path = dir.path().join(format!("location-{every}.csv"));
+        std::fs::write(&path, out).unwrap();
+        path
+    };
+    let e = phone_with_location(&write(1)).err().unwrap_or_default();
+    assert!(
+        e.contains("181 of 181 fixes are outside -90..90, -180..360 degrees")
+            && e.contains("as NMEA writes them? 47.4788663, 19.0226325 in degrees"),
+        "{e}"
+    );
+    let some = phone_with_location(&write(10)).unwrap();
+    assert_eq!(some.log.fix_count(), 181 - 18);
+    assert!(
+        some.log
+            .warnings
+            .iter()
+            .any(|w| w.contains("18 of 181 fixes are outside")
+                && w.contains("NMEA")
+                && w.ends_with("left out")),
+        "{:?}",
+        some.log.warnings
+    );
+}

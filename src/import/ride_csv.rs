@@ -978,12 +978,37 @@ pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
     Ok(())
 }
 
+/// A coordinate written as NMEA writes it, degrees and minutes run
+/// together (`ddmm.mmmm`, `dddmm.mmmm`: 4743.2599 is 47 deg 43.2599'), in
+/// degrees: `None` where `v` cannot be one (its minutes 60 or more, or its
+/// degrees beyond `limit`).
+fn degrees_minutes(v: f64, limit: f64) -> Option<f64> {
+    let a = v.abs();
+    let (degrees, minutes) = ((a / 100.0).trunc(), a % 100.0);
+    (a >= 100.0 && minutes < 60.0 && degrees <= limit)
+        .then(|| v.signum() * (degrees + minutes / 60.0))
+}
+
 /// What a fix out of range most likely is, for its error: integers of
-/// degrees times 10^7 (as u-blox and ArduPilot log them), or the two
-/// columns swapped (a longitude beyond 90 degrees read as latitude).
-fn coordinate_hint(lat: f64, lon: f64) -> String {
+/// degrees times 10^7 (as u-blox and ArduPilot log them), NMEA's degrees
+/// and minutes run together, or the two columns swapped (a longitude
+/// beyond 90 degrees read as latitude).
+pub(crate) fn coordinate_hint(lat: f64, lon: f64) -> String {
     // Beyond any degree (1e5 is 0.01 deg times 10^7) and within range divided.
     let e7 = |v: f64, limit: f64| v.abs() >= 1e5 && (v / 1e7).abs() <= limit;
+    // Either out of range as degrees, and both readable as degrees and minutes.
+    let nmea = (lat.abs() > 90.0 || lon.abs() > 180.0)
+        .then(|| {
+            let read = |v: f64, limit: f64| {
+                if v.abs() >= 100.0 {
+                    degrees_minutes(v, limit)
+                } else {
+                    (v.abs() <= limit).then_some(v)
+                }
+            };
+            Some((read(lat, 90.0)?, read(lon, 180.0)?))
+        })
+        .flatten();
     if e7(lat, 90.0) || e7(lon, 180.0) {
         format!(
             " (degrees times 10^7, as u-blox and ArduPilot log them? {:.7}, {:.7} in degrees: divide both by 10^7)",
@@ -993,6 +1018,10 @@ fn coordinate_hint(lat: f64, lon: f64) -> String {
     } else if (-90.0..=90.0).contains(&lon) && (-180.0..=180.0).contains(&lat) {
         format!(
             " (lat_deg and lon_deg swapped? {lat} is a longitude and {lon} a latitude: swap the two names in the header)"
+        )
+    } else if let Some((la, lo)) = nmea {
+        format!(
+            " (degrees and minutes run together, as NMEA writes them? {la:.7}, {lo:.7} in degrees: dd + mm.mmmm / 60)"
         )
     } else {
         String::new()
@@ -1215,7 +1244,23 @@ mod tests {
         let e = err(&GOOD.replace("47.49788883,19.04019799", "-122.47,37.72"));
         assert!(e.contains("swapped") && !e.contains("10^7"), "{e}");
         let e = err(&GOOD.replace("47.49788883,19.04019799", "95.0,400.0"));
-        assert!(!e.contains("swapped") && !e.contains("10^7"), "{e}");
+        assert!(
+            !e.contains("swapped") && !e.contains("10^7") && !e.contains("NMEA"),
+            "{e}"
+        );
+        // NMEA's degrees and minutes run together (47 deg 29.8733', 19 deg
+        // 2.4119', and a western longitude) are named with the degrees.
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "4729.87333,01902.41188"));
+        assert!(
+            e.starts_with("bad.csv:4: column 'lat_deg': 4729.87333 is outside -90..90")
+                && e.contains("as NMEA writes them? 47.4978888, 19.0401980 in degrees"),
+            "{e}"
+        );
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "3743.25986,-12228.33818"));
+        assert!(e.contains("37.7209977, -122.4723030 in degrees"), "{e}");
+        // Minutes of 60 or more are no minutes.
+        let e = err(&GOOD.replace("47.49788883,19.04019799", "4775.0,01902.4"));
+        assert!(!e.contains("NMEA"), "{e}");
         let e = err("# only comments\n");
         assert!(e.contains("no header"), "{e}");
         let e = err(GOOD.split("0.00,").next().unwrap());
