@@ -181,6 +181,56 @@ fn a_receiver_that_repeats_its_last_fix_for_ten_seconds_is_an_outage() {
     assert!(rms < 1.4, "{rms} m from the reference");
 }
 
+/// The same minute's 1 Hz fixes logged at 2 Hz, each written again half a
+/// second later (a logger that samples its receiver faster than it makes
+/// fixes): every repeat is a logger's and left out, and the path is the
+/// one of the fixes as logged once. Read as fixes, half of them half a
+/// second late took the path from 1.25 m to 5.74 m off the reference,
+/// reported as a success.
+#[test]
+fn a_receiver_logged_at_twice_its_rate_is_read_as_its_fixes() {
+    let once = load_file(&data("ride.csv")).expect("load");
+    let mut log = once.clone();
+    let mut last: Option<(usize, f64)> = None;
+    for j in 0..log.len() {
+        if log.fix[j].is_some() {
+            last = Some((j, log.t_s[j]));
+        } else if let Some((k, _)) = last.filter(|&(_, t)| log.t_s[j] - t >= 0.5) {
+            log.fix[j] = log.fix[k];
+            if let Some(a) = log.gps_alt_m.as_mut() {
+                a[j] = a[k];
+            }
+            last = None;
+        }
+    }
+    assert!(
+        log.fix_count() >= 2 * once.fix_count() - 2,
+        "{}",
+        log.fix_count()
+    );
+    let fitted = |log: &gyropath::import::RideLog| {
+        let sig = Arc::new(Signals::from_log(log).expect("signals"));
+        let truth = reference(&sig);
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+        fit.finish();
+        let path = fit.trajectory().p;
+        let rms = horizontal_rms(path.iter().copied().zip(truth.iter().copied()));
+        (sig, rms)
+    };
+    let (sig, rms) = fitted(&log);
+    let (sig_once, rms_once) = fitted(&once);
+    assert_eq!(sig.fixes, sig_once.fixes);
+    assert!(
+        sig.warnings
+            .iter()
+            .any(|w| w.contains("faster than the receiver makes them")),
+        "{:?}",
+        sig.warnings
+    );
+    eprintln!("fixes logged twice: path {rms:.3} m from the reference ({rms_once:.3} m once)");
+    assert_eq!(rms, rms_once);
+}
+
 /// The gyro of the same minute stops answering for 10 s (20-30 s), its
 /// rows written as zeros or as its last reading held, as a logger that
 /// loses its IMU writes them: the stop is found, the turn across it fitted
