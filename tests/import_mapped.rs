@@ -451,3 +451,45 @@ fn coordinates_in_degrees_and_minutes_are_named_as_such() {
         some.log.warnings
     );
 }
+
+/// A phone's gyro file whose nanosecond clock went through a
+/// single-precision float (a spreadsheet or a float32 array on the way):
+/// its times are whole multiples of 2^37 ns (137 s), nearly every row
+/// repeats the time of the row before, and the load fails naming the column
+/// and why. Before, those rows were dropped with a warning and the few left
+/// ended in "no usable GPS fix while the IMU and the odometer run".
+#[test]
+fn a_clock_written_as_single_precision_floats_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(mapped("phone-gyro.csv")).unwrap();
+    let mut out = String::new();
+    for (k, line) in text.lines().enumerate() {
+        let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+        if k > 0 {
+            let t: f64 = f[0].parse().unwrap();
+            f[0] = format!("{}", f64::from(t as f32));
+        }
+        out.push_str(&f.join(","));
+        out.push('\n');
+    }
+    let gyro = dir.path().join("phone-gyro.csv");
+    std::fs::write(&gyro, out).unwrap();
+    let e = import::open(
+        &gyro,
+        &ImportOptions {
+            map: Some(mapped("phone.toml")),
+            gps: Some(mapped("phone-location.csv")),
+            ..ImportOptions::default()
+        },
+    )
+    .map(|_| ())
+    .err()
+    .map(|e| e.to_string())
+    .unwrap_or_default();
+    assert!(
+        e.contains("phone-gyro.csv:3: column 'time'")
+            && e.contains("rows repeat the time of the row before")
+            && e.contains("whole multiples of 137438953472 ns, as a single-precision float"),
+        "{e}"
+    );
+}

@@ -284,8 +284,16 @@ impl Table {
         };
         let mut out = Vec::with_capacity(self.lines.len());
         let mut prev = i64::MIN;
+        // The first repeated time as read, and the one before it.
+        let mut repeated: Option<(usize, f64)> = None;
+        let mut raw_prev = f64::NAN;
         for row in 0..self.lines.len() {
-            let t = (self.required(row, column)? * scale + offset_s * 1e9).round() as i64;
+            let raw = self.required(row, column)?;
+            let t = (raw * scale + offset_s * 1e9).round() as i64;
+            if t == prev && repeated.is_none() {
+                repeated = Some((row, raw_prev));
+            }
+            raw_prev = raw;
             if t < prev {
                 return Err(self.field_err(
                     row,
@@ -299,6 +307,20 @@ impl Table {
             }
             out.push((t > prev).then_some(t));
             prev = t;
+        }
+        // Most rows on the time of the row before: the column is too coarse
+        // for its rows, and dropping them would leave a log of a few.
+        let dropped = out.iter().filter(|t| t.is_none()).count();
+        if let Some((row, before)) = repeated.filter(|_| 2 * dropped > out.len()) {
+            return Err(self.field_err(
+                row,
+                column,
+                format!(
+                    "{dropped} of {} rows repeat the time of the row before ({before} {unit}): the column is too coarse for its rows{}",
+                    out.len(),
+                    super::ride_csv::coarse_time_hint(before, before, unit)
+                ),
+            ));
         }
         Ok(out)
     }

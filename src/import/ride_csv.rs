@@ -511,7 +511,11 @@ impl<'c> RowReader<'c> {
             return Err(self.field_err(
                 line,
                 "t_s",
-                format!("time {t} does not increase (previous row {})", self.prev_t),
+                format!(
+                    "time {t} does not increase (previous row {}){}",
+                    self.prev_t,
+                    coarse_time_hint(t, self.prev_t, "s")
+                ),
             ));
         }
         let g = match [
@@ -978,6 +982,22 @@ pub fn write(log: &RideLog, w: &mut dyn Write) -> std::io::Result<()> {
     Ok(())
 }
 
+/// Why a time that repeats the row before may do so: a Unix time (or
+/// any time past 2^24 s) written as a single-precision float, whose steps
+/// there are 2 s or more (128 s in 2018), so that a 100 Hz log's rows share
+/// their times by the hundred.
+pub(crate) fn coarse_time_hint(t: f64, prev: f64, unit: &str) -> String {
+    let single = |v: f64| (v as f32) as f64 == v;
+    if t != prev || t.abs() < f64::from(1u32 << 24) || !single(t) {
+        return String::new();
+    }
+    let step = f64::from((t as f32).abs()).log2().floor() - 23.0;
+    format!(
+        ": the times are whole multiples of {:.0} {unit}, as a single-precision float (7 digits) holds a time this large; write the time with more digits, or from the start of the log",
+        step.exp2()
+    )
+}
+
 /// A coordinate written as NMEA writes it, degrees and minutes run
 /// together (`ddmm.mmmm`, `dddmm.mmmm`: 4743.2599 is 47 deg 43.2599'), in
 /// degrees: `None` where `v` cannot be one (its minutes 60 or more, or its
@@ -1246,6 +1266,15 @@ mod tests {
         let e = err(&GOOD.replace("47.49788883,19.04019799", "95.0,400.0"));
         assert!(
             !e.contains("swapped") && !e.contains("10^7") && !e.contains("NMEA"),
+            "{e}"
+        );
+        // A Unix time written as a single-precision float: 128 s steps.
+        let e = err(&GOOD
+            .replace("\n0.00,", "\n1533198848,")
+            .replace("\n0.01,", "\n1533198848,"));
+        assert!(
+            e.starts_with("bad.csv:5: column 't_s': time 1533198848 does not increase")
+                && e.contains("whole multiples of 128 s, as a single-precision float"),
             "{e}"
         );
         // NMEA's degrees and minutes run together (47 deg 29.8733', 19 deg
