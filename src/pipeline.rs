@@ -47,8 +47,12 @@ pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference,
         .flatten();
     let track = match placed {
         // Without a clock the track tells, the ride's own clock decides
-        // (and refuses a UTC track, asking for the ride's start).
-        None => read.on_ride_clock(signals.t0_unix_s, signals.t0_boot_s, &signals.source)?,
+        // (and refuses a UTC track, asking for the ride's start); unless the
+        // track says that clock is off by seconds.
+        None => clock_checked(
+            read.on_ride_clock(signals.t0_unix_s, signals.t0_boot_s, &signals.source)?,
+            signals,
+        ),
         Some(clock) => {
             let mut track = read;
             for t in &mut track.t_s {
@@ -85,6 +89,89 @@ pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference,
     };
     let matched = reference::match_rows(signals, &track)?;
     Ok((track, matched))
+}
+
+/// A reference on the ride's clock is off by this much (s) or more when its
+/// track says so: the fixes' latency against a reference is tenths of a
+/// second (comma's 0.1 s), a clock kept in GPS time instead of UTC 18 s,
+/// a time zone hours.
+pub const REFERENCE_CLOCK_OFF_S: f64 = 1.0;
+
+/// Below [`REFERENCE_CLOCK_OFF_S`] and from this (s) up, an offset the
+/// odometer tells is said, not applied.
+pub const REFERENCE_CLOCK_DOUBT_S: f64 = 0.3;
+
+/// `track` (on the ride's clock) moved onto it by the offset its track
+/// tells ([`crate::diagnosis::reference_clock::track_clock`]), with a
+/// warning, where that offset is [`REFERENCE_CLOCK_OFF_S`] or more and the
+/// fixes lie at most half as far from the track there as at its times as
+/// given; `track` as it is otherwise. An RTK or INS track kept in GPS time
+/// against a log in UTC is 18 s off (the leap seconds since 1980): the comma
+/// drive's reference so was refused as "not of this ride" (310 m from the
+/// fixes), and a bicycle's at 5 m/s would have been measured 90 m off,
+/// blaming the fit.
+fn clock_checked(mut track: ReferenceTrack, signals: &Signals) -> ReferenceTrack {
+    let Some(clock) = crate::diagnosis::reference_clock::track_clock(&track, signals) else {
+        return track;
+    };
+    let off = clock.offset_s;
+    let nearer = clock
+        .median_at_zero_m
+        .is_none_or(|m0| clock.median_m <= 0.5 * m0);
+    if clock.by_distance && (REFERENCE_CLOCK_DOUBT_S..REFERENCE_CLOCK_OFF_S).contains(&off.abs()) {
+        // Too little to be sure of (an odometer's own latency is
+        // hundredths to a tenth or two), too much to pass over: 0.5 s on
+        // the comma drive took its path from 1.25 m to 7.4 m off.
+        let speed = signals.distance.iter().sum::<f64>() / signals.duration().max(1e-9);
+        track.warnings.push(format!(
+            "{}: its clock may be {off:+.2} s off the ride's (where the odometer's distance matches the track's): at the ride's mean {speed:.1} m/s that is {:.1} m along the track, which the error along the track then holds; it is measured at its times as given",
+            track.source,
+            off.abs() * speed
+        ));
+        return track;
+    }
+    if off.abs() < REFERENCE_CLOCK_OFF_S || !nearer {
+        return track;
+    }
+    // Offsets that are whole by their cause, taken as such where the track's
+    // is within a quarter of a second of one: GPS time's leap seconds over
+    // UTC (15 from mid 2012, 18 since 2017) and a time zone's whole hours.
+    let hours = off / 3600.0;
+    let (off, why) = if let Some(leap) = (15..=18)
+        .map(f64::from)
+        .find(|l| (off.abs() - l).abs() < 0.25)
+    {
+        (
+            leap.copysign(off),
+            format!(" (GPS time against UTC: {leap:.0} leap seconds)"),
+        )
+    } else if off.abs() >= 1800.0 && (hours - hours.round()).abs() * 3600.0 < 0.25 {
+        (
+            3600.0 * hours.round(),
+            format!(" ({:.0} h: a time zone)", hours.round()),
+        )
+    } else {
+        (off, String::new())
+    };
+    for t in &mut track.t_s {
+        *t -= off;
+    }
+    track.warnings.push(format!(
+        "{}: its clock is {off:+.2} s off the ride's{why}: the ride's fixes lie {} from it at its times as given, {:.1} m at {:+.2} s (found {}); it is measured with its times moved by {:+.2} s",
+        track.source,
+        clock
+            .median_at_zero_m
+            .map_or("too few to compare".to_string(), |m| format!("{m:.0} m in the median")),
+        clock.median_m,
+        clock.offset_s,
+        if clock.by_distance {
+            "where the odometer's distance matches the track's"
+        } else {
+            "where the fixes lie nearest it"
+        },
+        -off,
+    ));
+    track
 }
 
 /// Where a ride came from: its kind, the topics read (bags), the mounting

@@ -78,6 +78,9 @@ pub struct TrackClock {
     /// Whether the offset is the odometer's (free of the fixes' latency);
     /// else the fixes' own, their latency in it.
     pub by_distance: bool,
+    /// The fixes' median distance (m) from the reference at no offset
+    /// (`None` where too few fixes fall inside it there).
+    pub median_at_zero_m: Option<f64>,
 }
 
 /// The reference's horizontal position (east, north) at time `t` on its own
@@ -206,6 +209,7 @@ pub fn track_clock(track: &ReferenceTrack, signals: &Signals) -> Option<TrackClo
         median_m: median_at(by_distance.unwrap_or(offset)).map_or(median_m, |m| m.0),
         fixes: n,
         by_distance: by_distance.is_some(),
+        median_at_zero_m: median_at(0.0).map(|m| m.0),
     })
 }
 
