@@ -992,3 +992,67 @@ fn a_log_without_gps_offers_a_gps_track_and_loads_with_it() {
         ride.duration_s
     );
 }
+
+/// A ride whose gyro stopped answering for 15 s (zeros on all three axes
+/// while the bicycle rides on): the app's ride knows the stop, which the
+/// time plots shade, and the checks name it.
+#[test]
+fn a_gyro_stop_is_known_to_the_ride_and_named_by_the_checks() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("stopped.csv");
+    let sample = std::str::from_utf8(gyropath::app::SAMPLE_RIDE).expect("utf8");
+    let mut out = String::new();
+    let mut header: Option<Vec<String>> = None;
+    for line in sample.lines() {
+        if line.starts_with('#') {
+            out.push_str(line);
+        } else if header.is_none() {
+            header = Some(line.split(',').map(str::to_string).collect());
+            out.push_str(line);
+        } else {
+            let cols = header.as_ref().expect("header");
+            let mut f: Vec<String> = line.split(',').map(str::to_string).collect();
+            let t: f64 = f[0].parse().expect("time");
+            if (100.0..115.0).contains(&t) {
+                for name in ["gx_dps", "gy_dps", "gz_dps"] {
+                    let c = cols.iter().position(|c| c == name).expect("gyro column");
+                    f[c] = "0".into();
+                }
+            }
+            out.push_str(&f.join(","));
+        }
+        out.push('\n');
+    }
+    std::fs::write(&path, out).expect("write");
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    assert!(
+        h.state()
+            .ride
+            .as_ref()
+            .is_some_and(|r| r.gyro_stops.is_empty())
+    );
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::file(path),
+    ));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains("stopped"))));
+    let ride = h.state().ride.as_ref().expect("ride");
+    assert_eq!(ride.gyro_stops.len(), 1, "{:?}", ride.gyro_stops);
+    let (a, b) = ride.gyro_stops[0];
+    assert!(
+        (a - 100.0).abs() < 0.02 && (b - 115.0).abs() < 0.02,
+        "{a}-{b}"
+    );
+    // In the checks and among the ride's warnings.
+    assert!(
+        h.query_all_by_label_contains("gyro stopped: the gyro repeats one reading")
+            .count()
+            >= 1
+    );
+}

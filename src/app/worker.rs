@@ -150,6 +150,9 @@ pub struct RideView {
     pub fixes: Vec<[f64; 3]>,
     /// GPS outages (log time from, to): gaps between fixes longer than 2.5 s.
     pub outages: Vec<(f64, f64)>,
+    /// Where the gyro stopped answering (log time from, to): the fit
+    /// bridges them with free turns (`effects::gyro_stops`).
+    pub gyro_stops: Vec<(f64, f64)>,
     /// The effects of the catalogue this ride can take, with what each models.
     pub offered_effects: Vec<(String, String)>,
     pub warnings: Vec<String>,
@@ -758,6 +761,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         t0: t_first,
         fixes,
         outages: crate::diagnosis::view::outages(sig),
+        gyro_stops: sig.gyro_stops.clone(),
         offered_effects: crate::effects::offered(sig),
         warnings: sig.warnings.clone(),
         origin,

@@ -23,6 +23,8 @@ use time_series::{bias_ui, normalised_residuals_ui, residuals_ui};
 const GPS: Color32 = Color32::from_rgb(120, 160, 255);
 const PATH: Color32 = Color32::from_rgb(255, 200, 60);
 const OUTAGE: Color32 = Color32::from_rgb(255, 110, 200);
+/// Where the gyro stopped answering.
+const GYRO_STOP: Color32 = Color32::from_rgb(255, 150, 40);
 const SCALE: Color32 = Color32::from_gray(210);
 /// The reference track and the path's distance from it.
 const REFERENCE: Color32 = Color32::from_rgb(235, 235, 235);

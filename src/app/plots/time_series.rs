@@ -6,7 +6,7 @@ use egui::Id;
 use egui_plot::{HLine, Legend, Line, LineStyle, Plot, Polygon};
 
 use super::axes::{decimate, nice_grid, nice_grid_y, tick_label, view};
-use super::{AXES, OUTAGE};
+use super::{AXES, GYRO_STOP, OUTAGE};
 use crate::app::worker::{RideView, Snapshot};
 use crate::diagnosis::FixResidual;
 
@@ -29,6 +29,43 @@ fn time_plot(id: &str, height: f32, y_label: &str) -> Plot<'static> {
 
 fn time_group() -> Id {
     Id::unique("gyropath-time-axis")
+}
+
+/// Spans of the ride (log time from, to) lightly shaded over `y0..y1`,
+/// named once in the legend: a real city drive has dozens of outages, which
+/// as pairs of lines were a wall of pink.
+fn shade(
+    plot: &mut egui_plot::PlotUi<'_>,
+    spans: &[(f64, f64)],
+    t0: f64,
+    (y0, y1): (f64, f64),
+    name: &str,
+    fill: egui::Color32,
+) {
+    if y0.partial_cmp(&y1) != Some(std::cmp::Ordering::Less) {
+        return;
+    }
+    for &(a, b) in spans {
+        plot.polygon(
+            Polygon::new(
+                name,
+                vec![[a - t0, y0], [b - t0, y0], [b - t0, y1], [a - t0, y1]],
+            )
+            .fill_color(fill)
+            // No outline; its colour is the legend's marker.
+            .stroke(egui::Stroke::new(0.0, fill.to_opaque()))
+            .allow_hover(false),
+        );
+    }
+}
+
+/// The lowest and highest of `values` that are finite.
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    values
+        .filter(|v| v.is_finite())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        })
 }
 
 /// Total gyro bias (constant + segment), three axes, as steps over time.
@@ -80,6 +117,26 @@ pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32)
                 );
             }
         }
+        // Where the gyro stopped, over the drawn biases' range with their
+        // sigmas: the bias there is the fit's guess, the turn its free
+        // parameter.
+        let sigmas = snap
+            .sigma
+            .as_ref()
+            .filter(|s| s.segments.len() == snap.segments.len());
+        let y = range(snap.segments.iter().enumerate().flat_map(|(k, s)| {
+            let sd = sigmas.map_or([0.0; 3], |sg| sg.segments[k]);
+            axes.clone()
+                .flat_map(move |a| [s.bias_dps[a] - sd[a], s.bias_dps[a] + sd[a]])
+        }));
+        shade(
+            plot,
+            &ride.gyro_stops,
+            t0,
+            y,
+            "gyro stopped",
+            GYRO_STOP.gamma_multiply(0.35),
+        );
         hovered_time(plot, t0)
     });
     TimeHover(r.inner)
@@ -186,28 +243,27 @@ fn fix_series_ui(
                 );
             }
         }
-        // Outages lightly shaded over the values' own range (a real city
-        // drive has dozens: as pairs of lines they were a wall of pink).
-        let values = res
-            .iter()
-            .flat_map(|r| series.iter().filter_map(move |(_, f)| f(r)))
-            .filter(|v| v.is_finite());
-        let (y0, y1) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
-            (a.min(v), b.max(v))
-        });
-        if y0 < y1 {
-            for &(a, b) in &ride.outages {
-                plot.polygon(
-                    Polygon::new(
-                        "GPS outage",
-                        vec![[a - t0, y0], [b - t0, y0], [b - t0, y1], [a - t0, y1]],
-                    )
-                    .fill_color(OUTAGE.gamma_multiply(0.12))
-                    .stroke(egui::Stroke::NONE)
-                    .allow_hover(false),
-                );
-            }
-        }
+        // Outages and the gyro's stops shaded over the values' own range.
+        let y = range(
+            res.iter()
+                .flat_map(|r| series.iter().filter_map(move |(_, f)| f(r))),
+        );
+        shade(
+            plot,
+            &ride.outages,
+            t0,
+            y,
+            "GPS outage",
+            OUTAGE.gamma_multiply(0.12),
+        );
+        shade(
+            plot,
+            &ride.gyro_stops,
+            t0,
+            y,
+            "gyro stopped",
+            GYRO_STOP.gamma_multiply(0.35),
+        );
         hovered_time(plot, t0)
     });
     TimeHover(r.inner)
