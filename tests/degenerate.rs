@@ -210,20 +210,29 @@ fn gross_gps_blunders_are_left_out_as_if_never_logged() {
     // 1-based: the comments, the header, then the data rows.
     let comments = with.lines().take_while(|l| l.starts_with('#')).count();
     let line = first_row.get().expect("a blunder") + comments + 2;
-    let (path, rms, warnings) = fitted(&with);
-    let (clean, clean_rms, _) = fitted(&without);
+    left_out_as_if_never_logged(
+        &with,
+        &without,
+        &format!(
+            "8 GPS fixes left out as blunders: 3 at 0, 0 (a receiver's placeholder while it has no fix); 5 up to 3.3 km off the track, farther than 100 m/s moves between fixes (the first on line {line}"
+        ),
+    );
+}
+
+/// The fit of `with` is the fit of `without` to the digit (and near its
+/// fixes), and the fit's warnings and the check say `said`.
+fn left_out_as_if_never_logged(with: &str, without: &str, said: &str) {
+    let (path, rms, warnings) = fitted(with);
+    let (clean, clean_rms, _) = fitted(without);
     let worst = farthest_apart(&path, &clean);
     assert!(worst < 1e-9, "paths {worst} m apart");
     assert_eq!(rms, clean_rms);
     assert!(rms < 10.0, "{rms} m from the fixes");
-    let said = format!(
-        "8 GPS fixes left out as blunders: 3 at 0, 0 (a receiver's placeholder while it has no fix); 5 up to 3.3 km off the track, farther than 100 m/s moves between fixes (the first on line {line}"
-    );
     assert!(
-        warnings.iter().any(|w| w.contains(&said)),
+        warnings.iter().any(|w| w.contains(said)),
         "{warnings:?}\n{said}"
     );
-    check_says(&with, "GPS blunders", &said);
+    check_says(with, "GPS blunders", said);
 }
 
 /// A receiver that loses its fix and writes its last one again, once a
@@ -255,20 +264,13 @@ fn a_receivers_stale_fixes_are_left_out_as_if_never_logged() {
     let without = keeping_fixes(300.0, |k| !stale(k));
     let comments = with.lines().take_while(|l| l.starts_with('#')).count();
     let line = first_row.get().expect("a stale fix") + comments + 2;
-    let (path, rms, warnings) = fitted(&with);
-    let (clean, clean_rms, _) = fitted(&without);
-    let worst = farthest_apart(&path, &clean);
-    assert!(worst < 1e-9, "paths {worst} m apart");
-    assert_eq!(rms, clean_rms);
-    assert!(rms < 10.0, "{rms} m from the fixes");
-    let said = format!(
-        "10 GPS fixes repeat the fix before to the bit while the vehicle moves on (the longest run from line {line}"
+    left_out_as_if_never_logged(
+        &with,
+        &without,
+        &format!(
+            "10 GPS fixes repeat the fix before to the bit while the vehicle moves on (the longest run from line {line}"
+        ),
     );
-    assert!(
-        warnings.iter().any(|w| w.contains(&said)),
-        "{warnings:?}\n{said}"
-    );
-    check_says(&with, "GPS blunders", &said);
 }
 
 /// A logger that writes its last fix on every row (at the gyro's 100 Hz)

@@ -59,6 +59,19 @@ fn shade(
     }
 }
 
+/// Where the gyro stopped answering (see [`RideView::gyro_stops`]), shaded
+/// more strongly than an outage: there are few, and the fit's turns are free.
+fn shade_gyro_stops(plot: &mut egui_plot::PlotUi<'_>, ride: &RideView, t0: f64, y: (f64, f64)) {
+    shade(
+        plot,
+        &ride.gyro_stops,
+        t0,
+        y,
+        "gyro stopped",
+        GYRO_STOP.gamma_multiply(0.35),
+    );
+}
+
 /// The lowest and highest of `values` that are finite.
 fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
     values
@@ -129,14 +142,7 @@ pub fn bias_ui(ui: &mut egui::Ui, ride: &RideView, snap: &Snapshot, height: f32)
             axes.clone()
                 .flat_map(move |a| [s.bias_dps[a] - sd[a], s.bias_dps[a] + sd[a]])
         }));
-        shade(
-            plot,
-            &ride.gyro_stops,
-            t0,
-            y,
-            "gyro stopped",
-            GYRO_STOP.gamma_multiply(0.35),
-        );
+        shade_gyro_stops(plot, ride, t0, y);
         hovered_time(plot, t0)
     });
     TimeHover(r.inner)
@@ -256,14 +262,7 @@ fn fix_series_ui(
             "GPS outage",
             OUTAGE.gamma_multiply(0.12),
         );
-        shade(
-            plot,
-            &ride.gyro_stops,
-            t0,
-            y,
-            "gyro stopped",
-            GYRO_STOP.gamma_multiply(0.35),
-        );
+        shade_gyro_stops(plot, ride, t0, y);
         hovered_time(plot, t0)
     });
     TimeHover(r.inner)
