@@ -121,15 +121,22 @@ pub fn path_far_from_fixes(model: &Model, path: &impl PathAt) -> Option<Violatio
 /// gain, or the GPS track's length over the odometer's), where it is near
 /// one of the usual confusions: km/h read as m/s (`1 / 3.6`), feet as
 /// metres (`0.3048`), knots (`0.514`, NMEA's speed) or mph (`0.447`) as
-/// m/s, km (`1000`) or miles (`1609`) as metres, centimetres (`0.01`), and
-/// each the other way round. The nearest in ratio is named if within
+/// m/s, km (`1000`) or miles (`1609`) as metres, centimetres (`0.01`), a
+/// wheel counted twice a revolution (`2`: two magnets, or a counter on
+/// both edges of each pulse; 2.8 % from knots, and before it was listed
+/// the comma drive's odometer doubled read as knots), and each the other
+/// way round. The nearest in ratio is named if within
 /// [`UNIT_TOLERANCE`]: feet and km/h are only 9 % apart (`3.28` against
 /// `3.6`), so a wheel's few percent decide between them, not a wide band.
 pub fn distance_units(g: f64) -> Option<String> {
     if !(g.is_finite() && g > 0.0) {
         return None;
     }
-    const CONFUSIONS: [(f64, &str); 7] = [
+    const CONFUSIONS: [(f64, &str); 8] = [
+        (
+            2.0,
+            "one count and two per wheel revolution (two magnets, or both edges of each pulse)",
+        ),
         (3.6, "km/h and m/s"),
         (1.0 / 0.3048, "feet and metres"),
         (1.0 / 0.514_444, "knots and m/s"),
@@ -221,6 +228,10 @@ mod tests {
         assert!(said(0.3048 * 1.03).contains("feet and metres"));
         assert!(said(1.0 / 3.6 * 1.03).contains("km/h"));
         assert!(said(0.514_444).contains("knots"));
+        // A wheel counted twice is 2.8 % from knots: the nearer is named.
+        assert!(said(1.0 / 1.984).contains("two per wheel revolution"));
+        assert!(said(2.0 * 1.01).contains("two per wheel revolution"));
+        assert!(said(0.514_444 * 1.005).contains("knots"));
         assert!(said(1000.0 * 0.98).contains("metres and km"));
         assert!(said(1000.0).contains("1000 times too short"));
         assert!(said(1609.0).contains("miles"));
