@@ -1029,7 +1029,14 @@ pub(crate) fn coordinate_hint(lat: f64, lon: f64) -> String {
             Some((read(lat, 90.0)?, read(lon, 180.0)?))
         })
         .flatten();
-    if e7(lat, 90.0) || e7(lon, 180.0) {
+    // Both beyond any degree but under 10^7: as degrees times 10^7 within a
+    // degree of 0, 0 (open sea in the Gulf of Guinea); as metres, a
+    // projection's east and north (UTM's eastings are 166-834 km, its
+    // northings up to 10,000 km) or ECEF coordinates.
+    let metres = |v: f64| (1e3..1e7).contains(&v.abs());
+    if metres(lat) && metres(lon) && (lat.abs() >= 1e5 || lon.abs() >= 1e5) {
+        " (metres of a projection, such as UTM's easting and northing or ECEF, not degrees: lat_deg and lon_deg are WGS84 degrees; convert them, e.g. with pyproj)".into()
+    } else if e7(lat, 90.0) || e7(lon, 180.0) {
         format!(
             " (degrees times 10^7, as u-blox and ArduPilot log them? {:.7}, {:.7} in degrees: divide both by 10^7)",
             lat / 1e7,
@@ -1287,6 +1294,11 @@ mod tests {
         );
         let e = err(&GOOD.replace("47.49788883,19.04019799", "3743.25986,-12228.33818"));
         assert!(e.contains("37.7209977, -122.4723030 in degrees"), "{e}");
+        // UTM's easting and northing in metres, either way round.
+        for pair in ["5800123.4,390456.7", "390456.7,5800123.4"] {
+            let e = err(&GOOD.replace("47.49788883,19.04019799", pair));
+            assert!(e.contains("UTM") && !e.contains("10^7"), "{e}");
+        }
         // Minutes of 60 or more are no minutes.
         let e = err(&GOOD.replace("47.49788883,19.04019799", "4775.0,01902.4"));
         assert!(!e.contains("NMEA"), "{e}");
