@@ -213,40 +213,47 @@ pub const HELD_SHARE: f64 = 0.25;
 /// distance moves more than [`STALE_MOVED_M`] between its first fix and
 /// any repeat.
 pub fn stale(fix: &[Option<(f64, f64)>], skip: &[usize], step_m: &[f64]) -> Vec<(Vec<usize>, f64)> {
+    /// The run so far: its first fix's bits and the distance there, its
+    /// repeats, and how far the vehicle has moved from its first fix.
+    struct Run {
+        bits: (u64, u64),
+        from: f64,
+        repeats: Vec<usize>,
+        moved: f64,
+    }
+    let mut runs = Vec::new();
+    let mut close = |run: Option<Run>| {
+        if let Some(r) = run.filter(|r| r.moved > STALE_MOVED_M) {
+            runs.push((r.repeats, r.moved));
+        }
+    };
+    // The distance travelled through each row's step, summed as the rows
+    // are passed (no table of the ride's length).
     let mut travelled = 0.0;
-    let mut at = vec![0.0; fix.len()];
-    for (j, a) in at.iter_mut().enumerate() {
+    let mut run: Option<Run> = None;
+    let mut skipped = skip.iter().peekable();
+    for (row, f) in fix.iter().enumerate() {
         travelled += step_m
-            .get(j)
+            .get(row)
             .copied()
             .filter(|d| d.is_finite())
             .unwrap_or(0.0);
-        *a = travelled;
-    }
-    let mut runs = Vec::new();
-    // The run so far: its first fix's row and bits, its repeats.
-    let mut run: Option<(usize, (u64, u64), Vec<usize>)> = None;
-    let mut close = |run: Option<(usize, (u64, u64), Vec<usize>)>| {
-        if let Some((first, _, repeats)) = run {
-            let moved = repeats
-                .iter()
-                .map(|&r| (at[r] - at[first]).abs())
-                .fold(0.0, f64::max);
-            if moved > STALE_MOVED_M {
-                runs.push((repeats, moved));
-            }
-        }
-    };
-    let mut skipped = skip.iter().peekable();
-    for (row, f) in fix.iter().enumerate() {
         let Some((lat, lon)) = *f else { continue };
         if skipped.next_if_eq(&&row).is_some() {
             continue;
         }
         let bits = (lat.to_bits(), lon.to_bits());
         match &mut run {
-            Some((_, b, repeats)) if *b == bits => repeats.push(row),
-            _ => close(run.replace((row, bits, Vec::new()))),
+            Some(r) if r.bits == bits => {
+                r.repeats.push(row);
+                r.moved = r.moved.max((travelled - r.from).abs());
+            }
+            _ => close(run.replace(Run {
+                bits,
+                from: travelled,
+                repeats: Vec::new(),
+                moved: 0.0,
+            })),
         }
     }
     close(run);

@@ -65,16 +65,12 @@ pub fn reference_for(path: &Path, signals: &Signals) -> Result<MatchedReference,
             track.clock = Clock::Ride;
             // What a clock off by a tenth of a second costs along the
             // track at the ride's mean speed.
-            let speed = signals.distance.iter().sum::<f64>() / signals.duration().max(1e-9);
+            let speed = signals.mean_speed_mps();
             track.warnings.push(format!(
                 "{}: its times are UTC and {} does not say when it started (no t0_unix_s): placed on the ride's clock by its track ({start}, {}; {} fixes a median of {:.1} m from it there). A clock found so carries that sensor's latency, hundredths to tenths of a second: at the ride's mean {speed:.1} m/s, 0.1 s is {:.1} m along the track, so the error along the track{} is uncertain by that much; a '# t0_unix_s:' line in the ride places it by the clock instead",
                 track.source,
                 signals.source,
-                if clock.by_distance {
-                    "where the odometer's distance matches the track's"
-                } else {
-                    "where the fixes lie nearest it (the odometer's speed varies too little to tell)"
-                },
+                clock.found_by(),
                 clock.fixes,
                 clock.median_m,
                 0.1 * speed,
@@ -122,7 +118,7 @@ fn clock_checked(mut track: ReferenceTrack, signals: &Signals) -> ReferenceTrack
         // Too little to be sure of (an odometer's own latency is
         // hundredths to a tenth or two), too much to pass over: 0.5 s on
         // the comma drive took its path from 1.25 m to 7.4 m off.
-        let speed = signals.distance.iter().sum::<f64>() / signals.duration().max(1e-9);
+        let speed = signals.mean_speed_mps();
         track.warnings.push(format!(
             "{}: its clock may be {off:+.2} s off the ride's (where the odometer's distance matches the track's): at the ride's mean {speed:.1} m/s that is {:.1} m along the track, which the error along the track then holds; it is measured at its times as given",
             track.source,
@@ -164,11 +160,7 @@ fn clock_checked(mut track: ReferenceTrack, signals: &Signals) -> ReferenceTrack
             .map_or("too few to compare".to_string(), |m| format!("{m:.0} m in the median")),
         clock.median_m,
         clock.offset_s,
-        if clock.by_distance {
-            "where the odometer's distance matches the track's"
-        } else {
-            "where the fixes lie nearest it"
-        },
+        clock.found_by(),
         -off,
     ));
     track
@@ -296,13 +288,7 @@ pub fn failure_given(fit: &Reconstruction, origin: &Origin) -> Option<String> {
     let found: Vec<String> = origin
         .verdicts
         .iter()
-        .filter(|v| {
-            v.level == Level::Problem
-                && matches!(
-                    v.subject.as_str(),
-                    "vertical axis" | "forward axis" | "gyro units"
-                )
-        })
+        .filter(|v| v.level == Level::Problem && v.is_axes_or_units())
         .map(|v| format!("  {}: {}", v.subject, v.message))
         .collect();
     if found.is_empty() {

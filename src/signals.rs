@@ -456,6 +456,11 @@ impl Signals {
         self.t.last().copied().unwrap_or(0.0) - self.t.first().copied().unwrap_or(0.0)
     }
 
+    /// The ride's mean speed (m/s): its distance over its duration.
+    pub fn mean_speed_mps(&self) -> f64 {
+        self.distance.iter().sum::<f64>() / self.duration().max(1e-9)
+    }
+
     /// Index of the fix on `row`, if any.
     pub fn fix_index(&self, row: usize) -> Option<usize> {
         match self.fix_at_row[row] {

@@ -83,6 +83,19 @@ pub struct TrackClock {
     pub median_at_zero_m: Option<f64>,
 }
 
+impl TrackClock {
+    /// How the offset was found, in words: "where the odometer's distance
+    /// matches the track's", or where the fixes lie nearest it (the
+    /// odometer's speed varies too little to tell).
+    pub fn found_by(&self) -> &'static str {
+        if self.by_distance {
+            "where the odometer's distance matches the track's"
+        } else {
+            "where the fixes lie nearest it (the odometer's speed varies too little to tell)"
+        }
+    }
+}
+
 /// The reference's horizontal position (east, north) at time `t` on its own
 /// clock, interpolated between points at most `max_gap` apart.
 fn at(track_t: &[f64], en: &[[f64; 2]], t: f64, max_gap: f64) -> Option<[f64; 2]> {

@@ -622,24 +622,24 @@ pub fn join(mut st: Streams) -> Result<RideLog, LoadError> {
     }
     let fix_count = fixes.len();
     let mut no_fix = 0;
-    // Fixes whose coordinates are no degrees (units: 10^7, NMEA's degrees
-    // and minutes), and the first of them.
-    let mut out_of_range: Vec<(f64, f64)> = Vec::new();
+    // How many fixes' coordinates are no degrees (units: 10^7, NMEA's
+    // degrees and minutes), and the first of them.
+    let (mut out_of_range, mut first_out) = (0usize, None);
     fixes.retain(|f| {
         let finite = f.status >= 0 && f.lat.is_finite() && f.lon.is_finite();
         let in_range = (-90.0..=90.0).contains(&f.lat) && (-180.0..=360.0).contains(&f.lon);
         if finite && !in_range {
-            out_of_range.push((f.lat, f.lon));
+            out_of_range += 1;
+            first_out = first_out.or(Some((f.lat, f.lon)));
             return false;
         }
         let usable = finite && !(f.lat == 0.0 && f.lon == 0.0);
         no_fix += usize::from(!usable);
         usable
     });
-    let range_said = out_of_range.first().map(|&(lat, lon)| {
+    let range_said = first_out.map(|(lat, lon)| {
         format!(
-            "'{fix_name}': {} of {fix_count} fixes are outside -90..90, -180..360 degrees (the first: {lat}, {lon}{})",
-            out_of_range.len(),
+            "'{fix_name}': {out_of_range} of {fix_count} fixes are outside -90..90, -180..360 degrees (the first: {lat}, {lon}{})",
             super::ride_csv::coordinate_hint(lat, lon)
         )
     });

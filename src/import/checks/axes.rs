@@ -90,7 +90,7 @@ pub(super) fn gyro_confusions(beta: f64, sigma: f64) -> Vec<(f64, &'static str)>
     if !(b.is_finite() && b > 0.0) {
         return Vec::new();
     }
-    let band = (3.0 * sigma / beta.abs())
+    let band = (3.0 * sigma / b)
         .clamp(GYRO_UNIT_TOLERANCE, GYRO_UNIT_WIDEST)
         .ln_1p();
     let mut near: Vec<(f64, f64, &str)> = GYRO_CONFUSIONS

@@ -83,6 +83,15 @@ impl Verdict {
     pub fn as_warning(&self) -> String {
         format!("{}: {}", self.subject, self.message)
     }
+
+    /// Whether it is about the log's axes or the gyro's units, which a
+    /// mounting undoes.
+    pub fn is_axes_or_units(&self) -> bool {
+        matches!(
+            self.subject.as_str(),
+            "vertical axis" | "forward axis" | "gyro units"
+        )
+    }
 }
 
 /// Which logged axis plays a role, with its sign and how strongly the data say so.
@@ -147,11 +156,7 @@ impl CheckReport {
         self.verdicts
             .iter()
             .map(|v| {
-                let axes = matches!(
-                    v.subject.as_str(),
-                    "vertical axis" | "forward axis" | "gyro units"
-                );
-                if undone && axes && v.level == Level::Problem {
+                if undone && v.is_axes_or_units() && v.level == Level::Problem {
                     Verdict {
                         subject: v.subject.clone(),
                         level: Level::Info,
@@ -293,7 +298,6 @@ pub fn check(log: &RideLog) -> CheckReport {
         report.recommended = Mount::from_forward_up(fwd, (v.axis, v.sign)).map(|mut m| {
             if let Some(s) = report
                 .course_per_gyro
-                .filter(|b| !(0.8..=1.25).contains(b))
                 .and_then(|b| unit_factor(b, report.course_per_gyro_sigma.unwrap_or(0.0)))
             {
                 m.scale = s;
