@@ -43,19 +43,30 @@ pub fn check(args: &CheckArgs) -> Result<()> {
         _ = writeln!(text, "{:<9} {}: {}", v.level.label(), v.subject, v.message);
     }
     _ = writeln!(text);
+    // Where the turn's scale matched no unit (a warning), the mounting
+    // claims none.
+    let units = if report
+        .verdicts
+        .iter()
+        .any(|v| v.subject == "gyro units" && v.level == Level::Warning)
+    {
+        "in units the data do not tell (see gyro units)"
+    } else {
+        "in deg/s"
+    };
     match &report.recommended {
         // Without an accelerometer the forward axis is not told (see the
         // forward axis' verdict): only what the data say is claimed.
         Some(m) if m.is_identity() && report.forward.is_none() => {
             _ = writeln!(
                 text,
-                "mounting  as logged: z up, in deg/s (which axis is forward the data cannot tell)"
+                "mounting  as logged: z up, {units} (which axis is forward the data cannot tell)"
             )
         }
         Some(m) if m.is_identity() => {
             _ = writeln!(
                 text,
-                "mounting  as logged: the axes are x forward, y left, z up, in deg/s"
+                "mounting  as logged: the axes are x forward, y left, z up, {units}"
             )
         }
         Some(m) => {
