@@ -34,6 +34,7 @@ pub mod geodesy;
 pub mod gyro_stops;
 pub mod import;
 pub mod limits;
+pub mod log_gaps;
 pub mod model;
 pub mod odometer_jumps;
 pub mod optimisation;

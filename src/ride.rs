@@ -50,12 +50,15 @@ pub struct RideLog {
     pub channels: Vec<(String, Vec<Option<f64>>)>,
     /// Notes about the file that are not errors (dropped text columns, ...).
     pub warnings: Vec<String>,
+    /// Rows that no line of the source holds: filled across the log's gaps
+    /// before the signals are derived (see [`crate::log_gaps`]).
+    pub filled: Vec<std::ops::Range<usize>>,
 }
 
 impl RideLog {
     /// The optional number columns that a log has, for what is done to
     /// every column alike.
-    fn number_columns_mut(&mut self) -> impl Iterator<Item = &mut Vec<Option<f64>>> {
+    pub(crate) fn number_columns_mut(&mut self) -> impl Iterator<Item = &mut Vec<Option<f64>>> {
         [
             &mut self.odo_m,
             &mut self.speed_mps,
@@ -117,6 +120,12 @@ impl RideLog {
         for (_, c) in &mut self.channels {
             cut(c, &rows);
         }
+        self.filled = self
+            .filled
+            .iter()
+            .map(|f| f.start.max(rows.start) - rows.start..f.end.min(rows.end).max(rows.start) - rows.start)
+            .filter(|f| !f.is_empty())
+            .collect();
     }
 
     /// Keep only the rows from `start` to `end` (s, the log's clock), the
@@ -179,6 +188,8 @@ impl RideLog {
             v.extend(column);
             self.channels.push((name, v));
         }
+        self.filled
+            .extend(other.filled.iter().map(|f| f.start + n..f.end + n));
         self.line.extend(other.line);
         self.t_s.extend(other.t_s);
         self.gyro_dps.extend(other.gyro_dps);

@@ -134,11 +134,27 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<(String, [(f64, f64); 2])
 ///   caught leaning into a bend at the stop's start and out of it at its
 ///   end, by tens of degrees over a 15 s stop, and the fit failed 75 m from
 ///   its fixes.
-fn bridge_stops(t: &[f64], gyro: &mut [Vector3<f64>], distance: &[f64]) -> Vec<(f64, f64)> {
-    let runs: Vec<_> = crate::gyro_stops::find(t, |j| gyro[j].into(), distance)
+///
+/// The rows `filled` across the log's gaps (see [`crate::log_gaps`]) are
+/// bridged alike: the gyro did not answer there either.
+fn bridge_stops(
+    t: &[f64],
+    gyro: &mut [Vector3<f64>],
+    distance: &[f64],
+    filled: &[crate::log_gaps::Filled],
+) -> Vec<(f64, f64)> {
+    let mut runs: Vec<(usize, usize)> = crate::gyro_stops::find(t, |j| gyro[j].into(), distance)
         .into_iter()
         .filter(|r| r.kind.is_some())
+        .map(|r| (r.first, r.last))
         .collect();
+    runs.extend(
+        filled
+            .iter()
+            .filter(|f| !f.rows.is_empty())
+            .map(|f| (f.rows.start, f.rows.end - 1)),
+    );
+    runs.sort_unstable();
     if runs.is_empty() {
         return Vec::new();
     }
@@ -148,8 +164,8 @@ fn bridge_stops(t: &[f64], gyro: &mut [Vector3<f64>], distance: &[f64]) -> Vec<(
     };
     let (roll, pitch) = (median(0), median(1));
     let mut stops = Vec::new();
-    for run in runs {
-        let (first, last) = (run.first.max(1), run.last);
+    for (first, last) in runs {
+        let first = first.max(1);
         let before = gyro[first - 1].z;
         let after = gyro.get(last + 1).map_or(before, |w| w.z);
         let (ta, tb) = (t[first - 1], t.get(last + 1).copied().unwrap_or(t[last]));
@@ -240,6 +256,10 @@ pub struct Signals {
     /// roll and pitch rates (see `bridge_stops`), and whose turns
     /// `effects::gyro_stops` fits.
     pub gyro_stops: Vec<(f64, f64)>,
+    /// The gaps in the log filled with rows (see [`crate::log_gaps`]), as
+    /// the times `(t_a, t_b)` of the samples either side; each is also one
+    /// of the [`Signals::gyro_stops`].
+    pub log_gaps: Vec<(f64, f64)>,
     /// Per row, the spread (m^2) of the distance inside the GNSS-speed gaps
     /// that no parameter carries (`effects::gnss_gaps`), filled by the first
     /// model built on these signals: it depends on them alone, and the noise
@@ -456,6 +476,20 @@ impl Signals {
         self.t.last().copied().unwrap_or(0.0) - self.t.first().copied().unwrap_or(0.0)
     }
 
+    /// The stretches whose distance is interpolated, not measured, as
+    /// `(t_a, t_b)`: the GNSS speed's gaps, or the log's own gaps
+    /// ([`Signals::log_gaps`]) where the distance is a logged speed's or the
+    /// wheel pulses' (a cumulative odometer's reading after a gap says how
+    /// far the vehicle went). Each one's distance is a parameter of the fit
+    /// (`effects::gnss_gaps`).
+    pub fn distance_gaps(&self) -> Vec<(f64, f64)> {
+        match &self.odometer {
+            Odometer::GnssSpeed { gaps, .. } => gaps.clone(),
+            Odometer::Speed | Odometer::WheelPulses { .. } => self.log_gaps.clone(),
+            Odometer::Cumulative | Odometer::Merged { .. } => Vec::new(),
+        }
+    }
+
     /// The ride's mean speed (m/s): its distance over its duration.
     pub fn mean_speed_mps(&self) -> f64 {
         self.distance.iter().sum::<f64>() / self.duration().max(1e-9)
@@ -471,18 +505,24 @@ impl Signals {
 
     /// Derive the signals of a loaded log.
     pub fn from_log(log: &RideLog) -> Result<Self, SignalError> {
-        Self::derive(log, log.gyro_dps.clone())
+        Self::from_owned_log(log.clone())
     }
 
     /// Derive the signals of a loaded log, consuming it: its gyro column
     /// becomes the rates in place (a 6-hour log is not copied).
+    /// The log's gaps are filled first (see [`crate::log_gaps`]).
     pub fn from_owned_log(mut log: RideLog) -> Result<Self, SignalError> {
+        let filled = crate::log_gaps::fill(&mut log);
         let gyro_dps = std::mem::take(&mut log.gyro_dps);
-        Self::derive(&log, gyro_dps)
+        Self::derive(&log, gyro_dps, &filled)
     }
 
     /// The signals of `log`, whose gyro column (deg/s) is given apart.
-    fn derive(log: &RideLog, gyro_dps: Vec<[f64; 3]>) -> Result<Self, SignalError> {
+    fn derive(
+        log: &RideLog,
+        gyro_dps: Vec<[f64; 3]>,
+        filled: &[crate::log_gaps::Filled],
+    ) -> Result<Self, SignalError> {
         let file = log.source.clone();
         let unusable = |message: String| SignalError::Unusable {
             file: file.clone(),
@@ -533,7 +573,7 @@ impl Signals {
         let (distance, jumps) =
             odometer_distance_and_jumps(log, |j| gyro[j].map(f64::to_degrees).into());
         let (distance, odometer) = distance?;
-        let gyro_stops = bridge_stops(&t, &mut gyro, &distance);
+        let gyro_stops = bridge_stops(&t, &mut gyro, &distance, filled);
         if attitude.is_planar() {
             for w in &mut gyro {
                 w.x = 0.0;
@@ -541,6 +581,19 @@ impl Signals {
             }
         }
         let mut warnings = log.warnings.clone();
+        if let Some(longest) = filled
+            .iter()
+            .max_by(|a, b| (a.to_s - a.from_s).total_cmp(&(b.to_s - b.from_s)))
+        {
+            warnings.push(format!(
+                "{file}: {} gap(s) in the log of {:.0}-{MAX_GAP_S:.0} s, the longest {:.2} s after t = {:.2} s (line {}): rows are filled across each at the log's rate, and the turn across it is fitted as across a gyro stop",
+                filled.len(),
+                crate::log_gaps::MIN_GAP_S,
+                longest.to_s - longest.from_s,
+                longest.from_s,
+                log.line.get(longest.rows.end).copied().unwrap_or(0),
+            ));
+        }
         if let Some(g) = gaps.longest {
             warnings.push(format!(
                 "{file}: {} gap(s) in the log longer than {:.3} s (5 sample intervals), the longest {:.2} s at t = {:.2} s; the rotation across each is interpolated between the samples either side",
@@ -670,6 +723,7 @@ impl Signals {
             t0_boot_s,
             has_gnss_speed: log.gnss_speed_samples() >= 2,
             gyro_stops,
+            log_gaps: filled.iter().map(|f| (f.from_s, f.to_s)).collect(),
             gap_spread: std::sync::OnceLock::new(),
             coarse_steps: std::sync::OnceLock::new(),
         })
@@ -769,6 +823,7 @@ impl Signals {
             has_gps_alt: self.has_gps_alt,
             has_gnss_speed: self.has_gnss_speed,
             gyro_stops: self.gyro_stops.clone(),
+            log_gaps: self.log_gaps.clone(),
             channels,
             odometer: self.odometer.clone(),
             attitude: self.attitude.clone(),
@@ -923,7 +978,14 @@ pub fn distance_from_gnss_speed(
     let mut stands_in_gaps = Vec::new();
     let mut stand_rule = None;
     if !gaps.is_empty() {
-        let activity = crate::standing::activity(t, &rate_dps);
+        let mut activity = crate::standing::activity(t, &rate_dps);
+        // Rows filled across a gap in the log carry no shaking of their
+        // own: they are not told to stand.
+        for rows in &log.filled {
+            if let Some(a) = activity.get_mut(rows.clone()) {
+                a.fill(f64::NAN);
+            }
+        }
         let mut in_gap = vec![false; t.len()];
         for &gap in &gaps {
             in_gap[crate::standing::gap_rows(t, gap)].fill(true);

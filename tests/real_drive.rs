@@ -279,3 +279,60 @@ fn a_gyro_that_stops_answering_for_ten_seconds_is_bridged() {
         assert!(best.significant, "held {held}: {best:?}");
     }
 }
+
+/// The logger of the same minute drops its rows for 10 s (20-30 s), as a
+/// phone app sent to the background or an SD card's write stall does: the
+/// gap is filled with rows at the log's rate and the turn across it
+/// fitted (`gyro_stops`, two pieces: no fix inside tells more). Outside
+/// the gap the path stays near comma's reference (1.18 m; 1.48 m with the
+/// rotation interpolated across one step, as before).
+#[test]
+fn ten_seconds_of_rows_lost_are_filled_and_the_turn_across_them_fitted() {
+    let whole = load_file(&data("ride.csv")).expect("load");
+    let mut log = whole.clone();
+    let first = log.t_s.partition_point(|&t| t <= 20.0);
+    let end = log.t_s.partition_point(|&t| t < 30.0);
+    log.keep_rows(0..first);
+    let mut after = whole.clone();
+    after.keep_rows(end..whole.len());
+    log.append(after);
+    let sig = Arc::new(Signals::from_log(&log).expect("signals"));
+    assert_eq!(sig.log_gaps.len(), 1, "{:?}", sig.log_gaps);
+    // Bridged as a gyro stop, to the last row filled.
+    assert_eq!(sig.gyro_stops.len(), 1);
+    let ((a, b), (c, d)) = (sig.log_gaps[0], sig.gyro_stops[0]);
+    assert!(a == c && d < b && b - d < 0.02, "{a}-{b} bridged {c}-{d}");
+    assert!(
+        sig.warnings
+            .iter()
+            .any(|w| w.contains("1 gap(s) in the log") && w.contains("rows are filled")),
+        "{:?}",
+        sig.warnings
+    );
+    // Filled at the log's rate: about as many rows as were lost.
+    let filled = sig.len() - log.len();
+    assert!(
+        (filled as f64 - (end - first) as f64).abs() < 0.05 * (end - first) as f64,
+        "{filled} rows filled for {} lost",
+        end - first
+    );
+    let truth = reference(&Signals::from_log(&whole).expect("signals"));
+    let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+    fit.finish();
+    let broken = gyropath::limits::check(fit.model(), fit.params());
+    assert!(broken.is_empty(), "{broken:?}");
+    // The path's rows outside the gap are the log's own, in order.
+    let path = fit.trajectory().p;
+    let outside: Vec<Vector3<f64>> = (0..sig.len())
+        .filter(|&j| sig.t[j] <= a || sig.t[j] >= b)
+        .map(|j| path[j])
+        .collect();
+    let kept: Vec<Vector3<f64>> = (0..whole.len())
+        .filter(|&j| j < first || j >= end)
+        .map(|j| truth[j])
+        .collect();
+    assert_eq!(outside.len(), kept.len());
+    let rms = horizontal_rms(outside.into_iter().zip(kept));
+    eprintln!("rows lost for 10 s: path {rms:.3} m from the reference outside the gap");
+    assert!(rms < 1.35, "{rms} m from the reference");
+}

@@ -55,7 +55,7 @@
 
 use super::{Columns, DistancePartials, Effect, ParamInfo, PriorRows};
 use crate::contract::{ModelError, StartGuess};
-use crate::signals::{Odometer, Signals};
+use crate::signals::Signals;
 
 /// The prior's spread of a gap's mean speed about the interpolated one (m/s).
 const GAP_SPEED_SIGMA_MPS: f64 = 2.0;
@@ -230,16 +230,17 @@ impl<'a> Travelled<'a> {
 impl GnssGaps {
     /// Whether `signals` have gaps in a GNSS-speed distance (the effect's use).
     pub fn applies(signals: &Signals) -> bool {
-        matches!(&signals.odometer, Odometer::GnssSpeed { gaps, .. } if !gaps.is_empty())
+        !signals.distance_gaps().is_empty()
     }
 
     pub fn new(signals: &Signals) -> Result<Self, ModelError> {
-        let Odometer::GnssSpeed { gaps, .. } = &signals.odometer else {
+        let gaps = &signals.distance_gaps();
+        if gaps.is_empty() {
             return Err(ModelError::NotApplicable {
                 effect: "gnss_gaps".into(),
-                reason: "the distance is not the GNSS speed's".into(),
+                reason: "the distance is measured over the whole ride (no gap in the GNSS speed, nor in a logged speed or wheel pulses)".into(),
             });
-        };
+        }
         let n = signals.t.len();
         let mut step = vec![None; n];
         let mut lengths = Vec::with_capacity(gaps.len());

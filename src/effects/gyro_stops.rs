@@ -114,7 +114,8 @@ impl GyroStops {
             if length <= 0.0 {
                 continue;
             }
-            let pieces = (length / PIECE_S).ceil().max(1.0) as usize;
+            let fixes_inside = signals.fixes.iter().filter(|f| f.t > a && f.t < b).count();
+            let pieces = ((length / PIECE_S).ceil().max(1.0) as usize).min(fixes_inside + 2);
             let piece_length = length / pieces as f64;
             let first_piece = piece_lengths.len();
             for _ in 0..pieces {
