@@ -25,8 +25,8 @@
 //!   wheel pulses hold their last state (no revolution is invented);
 //! - the line is that of the row after the gap (what a message names).
 //!
-//! Gaps longer than [`crate::signals::MAX_GAP_S`] are pauses, refused
-//! before any row is filled.
+//! Gaps longer than [`MAX_GAP_S`] are pauses, refused before any row is
+//! filled (`crate::signals`).
 
 use crate::ride::RideLog;
 
@@ -35,6 +35,14 @@ use crate::ride::RideLog;
 /// over shorter ones a vehicle turns little, and the rate interpolated
 /// between the samples either side is close to the one it had.
 pub const MIN_GAP_S: f64 = crate::gyro_stops::MIN_STOP_S;
+
+/// The longest gap between rows (s) that is filled; a longer one is a
+/// pause: a logger stopped, a bike computer's or phone app's auto-pause,
+/// after which the vehicle may be anywhere. Across a 10-minute pause in a
+/// simulated 20-minute ride, the interpolated turn sent step 1 240 m off,
+/// and the fit took 122 s to end 13 m from its fixes (1.8 m without the
+/// pause) as a success.
+pub const MAX_GAP_S: f64 = 60.0;
 
 /// The rows filled across one gap.
 #[derive(Clone, Debug, PartialEq)]
@@ -61,7 +69,7 @@ fn gaps(t: &[f64]) -> Vec<(usize, usize)> {
     (1..t.len())
         .filter_map(|j| {
             let gap = t[j] - t[j - 1];
-            (gap > limit && gap <= crate::signals::MAX_GAP_S)
+            (gap > limit && gap <= MAX_GAP_S)
                 .then(|| (j, ((gap / median).round() as usize).saturating_sub(1)))
         })
         .filter(|&(_, m)| m > 0)
@@ -186,7 +194,8 @@ mod tests {
             assert_eq!(l.odo_m.as_ref().unwrap()[j], None);
             assert_eq!(l.channels[0].1[j], None);
             // Pulses hold the last state: no edge is invented.
-            assert!(l.wheel_pulse.as_ref().unwrap()[j]);
+            let pulses = l.wheel_pulse.as_ref().unwrap();
+            assert_eq!(pulses[j], pulses[3]);
         }
         // The rows either side are the log's own.
         assert_eq!(&l.t_s[..4], &t[..4]);

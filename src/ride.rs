@@ -123,7 +123,10 @@ impl RideLog {
         self.filled = self
             .filled
             .iter()
-            .map(|f| f.start.max(rows.start) - rows.start..f.end.min(rows.end).max(rows.start) - rows.start)
+            .map(|f| {
+                f.start.max(rows.start) - rows.start
+                    ..f.end.min(rows.end).max(rows.start) - rows.start
+            })
             .filter(|f| !f.is_empty())
             .collect();
     }

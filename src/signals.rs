@@ -113,6 +113,42 @@ pub(crate) fn pause(t: &[f64], line: &[u64]) -> Option<(String, [(f64, f64); 2])
     Some((message, [(first, before), (after, last)]))
 }
 
+/// Seconds either side of a gap in the log over which the wheel's speed
+/// into and out of it is taken (see [`pulses_across_gaps`]).
+const PULSE_SPEED_S: f64 = 2.0;
+
+/// The distance on the rows `filled` across the log's gaps (see
+/// [`crate::log_gaps`]) where it comes from wheel pulses: the speed
+/// interpolated between the wheel's mean speeds over the [`PULSE_SPEED_S`]
+/// either side, `d_j = v(t_j) dt_j`, up to the row after the gap. The
+/// revolutions inside a gap were never logged, and the pulses' own rule
+/// takes a long wait for the next one as a stop: a simulated bicycle went
+/// nowhere through a 15 s gap, and with the gap's distance free about that
+/// (`effects::gnss_gaps`, a prior of 2 m/s on its mean speed) the fit drove
+/// 224 m where the bicycle rode 60.
+fn pulses_across_gaps(t: &[f64], distance: &mut [f64], filled: &[crate::log_gaps::Filled]) {
+    let speed = |from: f64, to: f64, distance: &[f64]| -> f64 {
+        let rows = t.partition_point(|&x| x <= from)..t.partition_point(|&x| x <= to);
+        let (first, last) = (rows.start.max(1), rows.end.min(t.len()));
+        if last <= first {
+            return 0.0;
+        }
+        let time = t[last - 1] - t[first - 1];
+        let moved: f64 = distance[first..last].iter().sum();
+        if time > 0.0 { moved / time } else { 0.0 }
+    };
+    for f in filled {
+        let before = speed(f.from_s - PULSE_SPEED_S, f.from_s, distance);
+        let after = speed(f.to_s, f.to_s + PULSE_SPEED_S, distance);
+        let length = f.to_s - f.from_s;
+        let end = (f.rows.end + 1).min(t.len());
+        for j in f.rows.start.max(1)..end {
+            let v = before + (after - before) * ((t[j] - f.from_s) / length).clamp(0.0, 1.0);
+            distance[j] = v * (t[j] - t[j - 1]);
+        }
+    }
+}
+
 /// The stops of a gyro that stopped answering (see [`crate::gyro_stops`])
 /// in the step rates `gyro` (rad/s) of rows at `t` moving `distance`, as
 /// `(t_a, t_b)`: the rates of their steps (`t_a < t_j <= t_b`, the run's
@@ -182,13 +218,7 @@ fn bridge_stops(
     stops
 }
 
-/// The longest gap between rows (s) across which the rotation is
-/// interpolated (see `step_rates`); a longer one is a pause: a logger
-/// stopped, a bike computer's or phone app's auto-pause. Across a 10-minute
-/// pause in a simulated 20-minute ride, the interpolated turn sent step 1
-/// 240 m off, and the fit took 122 s to end 13 m from its fixes (1.8 m
-/// without the pause) as a success.
-pub const MAX_GAP_S: f64 = 60.0;
+pub use crate::log_gaps::MAX_GAP_S;
 
 /// A hint that column `t_s` holds milliseconds, microseconds or
 /// nanoseconds, when read so its rate `rate_hz` (read as seconds) becomes a
@@ -572,7 +602,10 @@ impl Signals {
         // as logged, before a planar ride's roll and pitch are set aside.
         let (distance, jumps) =
             odometer_distance_and_jumps(log, |j| gyro[j].map(f64::to_degrees).into());
-        let (distance, odometer) = distance?;
+        let (mut distance, odometer) = distance?;
+        if matches!(odometer, Odometer::WheelPulses { .. }) {
+            pulses_across_gaps(&t, &mut distance, filled);
+        }
         let gyro_stops = bridge_stops(&t, &mut gyro, &distance, filled);
         if attitude.is_planar() {
             for w in &mut gyro {

@@ -258,7 +258,11 @@ fn a_car_whose_rows_are_lost_in_a_bend_comes_out_of_it_on_its_road() {
     let kept = (0..truth.len()).filter(|&k| k < first || k >= end);
     let (mut sum, mut n) = (0.0, 0);
     for (j, k) in outside.zip(kept) {
-        assert!((sig.t[j] - k as f64 * 0.01).abs() < 1e-6, "row {j}: {}", sig.t[j]);
+        assert!(
+            (sig.t[j] - k as f64 * 0.01).abs() < 1e-6,
+            "row {j}: {}",
+            sig.t[j]
+        );
         sum += (path[j].x - truth[k].x).powi(2) + (path[j].y - truth[k].y).powi(2);
         n += 1;
     }
@@ -266,4 +270,100 @@ fn a_car_whose_rows_are_lost_in_a_bend_comes_out_of_it_on_its_road() {
     let rms = (sum / n as f64).sqrt();
     eprintln!("rows lost in a bend: {rms:.2} m from the truth outside the gap");
     assert!(rms < 2.5, "{rms} m from the truth");
+}
+
+/// A bicycle's logger (wheel pulses) drops its rows for 15 s where it turns
+/// most (seeds 5-7, 5 minutes; seed 5 turns 226 deg there). The pulses of
+/// the gap were never logged: its distance starts from the wheel's speed
+/// either side, free about it (`gnss_gaps`), and the turn across it is
+/// fitted in two pieces (`gyro_stops`), started from the line between the
+/// gyro's readings either side. Outside the gap the path is where it is
+/// with no rows lost (1.37, 2.20, 0.95 m against 1.34, 2.26, 0.93 m).
+/// Before, seed 5 ended 8.7 m from the truth; with the gap's distance free
+/// about the pulses' own (nothing: a long wait between revolutions is a
+/// stop) the fit drove 224 m where the bicycle rode 60; started from the
+/// fixes' turn, seed 7 came out of the gap 600 deg too far round, 1.93 m.
+#[test]
+fn a_bicycle_whose_rows_are_lost_in_its_sharpest_turn_comes_out_of_it_on_its_path() {
+    let (mut inside, mut rows) = (0, 0);
+    for seed in [5, 6, 7] {
+        let sim = simulate(&SimConfig {
+            seed,
+            duration_s: 300.0,
+            ..SimConfig::default()
+        })
+        .unwrap();
+        let whole = import::parse(sim.log_csv.as_bytes(), "bike.csv").expect("parse");
+        let whole_sig = Arc::new(Signals::from_log(&whole).expect("signals"));
+        // The 15 s window (from 30 s on, every 5 s) that turns most.
+        let turn = |a: f64| -> f64 {
+            (0..whole_sig.len())
+                .filter(|&j| whole_sig.t[j] > a && whole_sig.t[j] < a + 15.0)
+                .map(|j| whole_sig.gyro[j].z * whole_sig.dt[j])
+                .sum::<f64>()
+                .abs()
+        };
+        let a = (6..52)
+            .map(|k| 5.0 * k as f64)
+            .max_by(|x, y| turn(*x).total_cmp(&turn(*y)))
+            .unwrap();
+        let b = a + 15.0;
+        let mut log = whole.clone();
+        let first = log.t_s.partition_point(|&t| t <= a);
+        let end = log.t_s.partition_point(|&t| t < b);
+        let mut after = log.clone();
+        after.keep_rows(end..log.len());
+        log.keep_rows(0..first);
+        log.append(after);
+        let sig = Arc::new(Signals::from_owned_log(log).expect("signals"));
+        let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
+        fit.finish();
+        let broken = limits::check(fit.model(), fit.params());
+        assert!(broken.is_empty(), "seed {seed}: {broken:?}");
+        let path = fit.trajectory().p;
+        let u = fit.model().uncertainty(fit.params()).expect("uncertainty");
+        let truth = sim.truth_in(&sig.frame);
+        // Filled rows lie on the simulator's 100 Hz grid.
+        let at = |j: usize| (sig.t[j] * 100.0).round() as usize;
+        let h = |j: usize| {
+            let k = at(j);
+            (path[j].x - truth[k].x, path[j].y - truth[k].y)
+        };
+        let rms = |rows: &mut dyn Iterator<Item = usize>| {
+            let (mut s, mut n) = (0.0, 0);
+            for j in rows {
+                let (de, dn) = h(j);
+                s += de * de + dn * dn;
+                n += 1;
+            }
+            (s / n as f64).sqrt()
+        };
+        let gap = |j: &usize| sig.t[*j] > a && sig.t[*j] < b;
+        let outside = rms(&mut (0..sig.len()).filter(|j| !gap(j)));
+        let within = rms(&mut (0..sig.len()).filter(gap));
+        let whole_fit = {
+            let mut f =
+                Reconstruction::new(whole_sig.clone(), FitSettings::default()).expect("fit");
+            f.finish();
+            sim.errors(&whole_sig, &f.trajectory().p).path_all_m
+        };
+        eprintln!(
+            "seed {seed}: {:.0} deg lost at {a}-{b} s: path {outside:.2} m outside the gap ({whole_fit:.2} m with no rows lost), {within:.2} m inside",
+            turn(a).to_degrees()
+        );
+        assert!(
+            outside < 1.2 * whole_fit + 0.3,
+            "seed {seed}: {outside} vs {whole_fit}"
+        );
+        for j in (0..sig.len()).filter(gap) {
+            let (de, dn) = h(j);
+            inside += (u.mahalanobis2(j, de, dn) <= 5.991) as usize;
+            rows += 1;
+        }
+    }
+    // Not asserted: the band inside a gap carries the turns' and the
+    // distance's uncertainty, not how the vehicle went between them (0.50
+    // measured; docs/real-logs.md).
+    let share = inside as f64 / rows as f64;
+    eprintln!("the truth inside the 95 % band on {share:.3} of the gaps' rows");
 }

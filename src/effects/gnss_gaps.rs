@@ -255,7 +255,11 @@ impl GnssGaps {
             // gyro told stays put), over their time `T'_g`.
             let first = signals.t.partition_point(|&t| t <= a).max(1);
             let end = signals.t.partition_point(|&t| t <= b);
-            let moving = |j: usize| signals.distance[j] != 0.0;
+            // A gap in the log has no stand told inside it (its rows are
+            // filled, see `crate::log_gaps`), and wheel pulses count no
+            // distance there: the correction moves all of it.
+            let filled = signals.log_gaps.contains(&(a, b));
+            let moving = |j: usize| filled || signals.distance[j] != 0.0;
             let moving_s: f64 = (first..end)
                 .filter(|&j| moving(j))
                 .map(|j| signals.dt[j])
@@ -356,6 +360,7 @@ impl Effect for GnssGaps {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::signals::Odometer;
 
     fn signals_with_gaps() -> Signals {
         let mut s = crate::testing::simulated_signals(3, 60.0, &[]);
