@@ -1056,3 +1056,58 @@ fn a_gyro_stop_is_known_to_the_ride_and_named_by_the_checks() {
             >= 1
     );
 }
+
+/// The sample ride with 10 s of its rows lost (a logger's stall): the app
+/// opens it (before, the gap's turn was interpolated over one step), the
+/// ride knows the gap as a stop that the time plots shade as rows lost, and
+/// its warnings name it.
+#[test]
+fn a_ride_with_rows_lost_opens_with_the_gap_bridged() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("stalled.csv");
+    let sample = std::str::from_utf8(gyropath::app::SAMPLE_RIDE).expect("utf8");
+    let mut out = String::new();
+    let mut header = false;
+    for line in sample.lines() {
+        let kept = line.starts_with('#')
+            || !std::mem::replace(&mut header, true)
+            || !line
+                .split(',')
+                .next()
+                .and_then(|t| t.parse::<f64>().ok())
+                .is_some_and(|t| t > 100.0 && t < 110.0);
+        if kept {
+            out.push_str(line);
+            out.push('\n');
+        }
+    }
+    std::fs::write(&path, out).expect("write");
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    assert!(h.state().ride.as_ref().is_some_and(|r| !r.rows_lost));
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::file(path),
+    ));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains("stalled"))));
+    let ride = h.state().ride.as_ref().expect("ride");
+    assert!(ride.rows_lost);
+    assert_eq!(ride.gyro_stops.len(), 1, "{:?}", ride.gyro_stops);
+    let (a, b) = ride.gyro_stops[0];
+    assert!(
+        (a - 100.0).abs() < 0.02 && b < 110.0 && b > 109.9,
+        "{a}-{b}"
+    );
+    assert!(
+        ride.warnings
+            .iter()
+            .any(|w| w.contains("1 gap(s) in the log") && w.contains("rows are filled")),
+        "{:?}",
+        ride.warnings
+    );
+}

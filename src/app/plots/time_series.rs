@@ -59,7 +59,8 @@ fn shade(
     }
 }
 
-/// Where the gyro stopped answering (see [`RideView::gyro_stops`]), shaded
+/// Where the gyro stopped answering or the log lost its rows (see
+/// [`RideView::gyro_stops`]), shaded
 /// more strongly than an outage: there are few, and the fit's turns are free.
 fn shade_gyro_stops(plot: &mut egui_plot::PlotUi<'_>, ride: &RideView, t0: f64, y: (f64, f64)) {
     shade(
@@ -67,7 +68,11 @@ fn shade_gyro_stops(plot: &mut egui_plot::PlotUi<'_>, ride: &RideView, t0: f64, 
         &ride.gyro_stops,
         t0,
         y,
-        "gyro stopped",
+        if ride.rows_lost {
+            "gyro stopped or rows lost"
+        } else {
+            "gyro stopped"
+        },
         GYRO_STOP.gamma_multiply(0.35),
     );
 }
