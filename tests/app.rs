@@ -993,6 +993,30 @@ fn a_log_without_gps_offers_a_gps_track_and_loads_with_it() {
     );
 }
 
+/// The app on the sample ride (whose gyro answers on every row and which
+/// lost none), then with the ride at `path` opened, whose name holds `name`.
+fn the_sample_then(path: std::path::PathBuf, name: &str) -> Harness<'static, GyropathApp> {
+    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
+    let mut h = harness(app);
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .is_some()));
+    assert!(
+        h.state()
+            .ride
+            .as_ref()
+            .is_some_and(|r| r.gyro_stops.is_empty() && !r.rows_lost)
+    );
+    h.state_mut().apply(gyropath::app::Command::Open(
+        gyropath::app::worker::RideSource::file(path),
+    ));
+    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
+        .ride
+        .as_ref()
+        .is_some_and(|r| r.source.name().contains(name))));
+    h
+}
+
 /// A ride whose gyro stopped answering for 15 s (zeros on all three axes
 /// while the bicycle rides on): the app's ride knows the stop, which the
 /// time plots shade, and the checks name it.
@@ -1024,24 +1048,7 @@ fn a_gyro_stop_is_known_to_the_ride_and_named_by_the_checks() {
         out.push('\n');
     }
     std::fs::write(&path, out).expect("write");
-    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
-    let mut h = harness(app);
-    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
-        .ride
-        .is_some()));
-    assert!(
-        h.state()
-            .ride
-            .as_ref()
-            .is_some_and(|r| r.gyro_stops.is_empty())
-    );
-    h.state_mut().apply(gyropath::app::Command::Open(
-        gyropath::app::worker::RideSource::file(path),
-    ));
-    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
-        .ride
-        .as_ref()
-        .is_some_and(|r| r.source.name().contains("stopped"))));
+    let h = the_sample_then(path, "stopped");
     let ride = h.state().ride.as_ref().expect("ride");
     assert_eq!(ride.gyro_stops.len(), 1, "{:?}", ride.gyro_stops);
     let (a, b) = ride.gyro_stops[0];
@@ -1082,19 +1089,7 @@ fn a_ride_with_rows_lost_opens_with_the_gap_bridged() {
         }
     }
     std::fs::write(&path, out).expect("write");
-    let app = GyropathApp::new(manual_settings(), sample_ride(), || {});
-    let mut h = harness(app);
-    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
-        .ride
-        .is_some()));
-    assert!(h.state().ride.as_ref().is_some_and(|r| !r.rows_lost));
-    h.state_mut().apply(gyropath::app::Command::Open(
-        gyropath::app::worker::RideSource::file(path),
-    ));
-    assert!(step_until(&mut h, Duration::from_secs(30), |a| a
-        .ride
-        .as_ref()
-        .is_some_and(|r| r.source.name().contains("stalled"))));
+    let h = the_sample_then(path, "stalled");
     let ride = h.state().ride.as_ref().expect("ride");
     assert!(ride.rows_lost);
     assert_eq!(ride.gyro_stops.len(), 1, "{:?}", ride.gyro_stops);
