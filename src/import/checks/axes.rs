@@ -257,6 +257,10 @@ pub(super) fn course_vertical(
     let (mut dc, mut dt) = (Vec::new(), Vec::new());
     let mut turns: [Vec<f64>; 3] = Default::default();
     for w in stretches.idx.windows(3) {
+        // Across rows the log lost, the gyro's turn is not known.
+        if fixes[w[2]].lost_s > fixes[w[0]].lost_s {
+            continue;
+        }
         let course = |a: usize, b: usize| stretches.course(&fixes[w[a]], &fixes[w[b]]);
         let (Some(c1), Some(c2)) = (course(0, 1), course(1, 2)) else {
             continue;

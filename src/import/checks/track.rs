@@ -19,6 +19,10 @@ pub(super) struct AtFix {
     pub(super) turn: [f64; 3],
     /// Mean acceleration since the previous fix, per logged axis.
     pub(super) acc: Option<[f64; 3]>,
+    /// Time (s) the log lost its rows before this fix, in gaps longer than
+    /// [`crate::log_gaps::MIN_GAP_S`]: how the gyro turned across them
+    /// is not known (the fit fills and bridges them).
+    pub(super) lost_s: f64,
 }
 
 /// The fixes of `log` but its `blunders`, with what happened between them
@@ -31,6 +35,7 @@ pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
     let mut s = 0.0;
     let mut turn = [0.0; 3];
+    let mut lost_s = 0.0;
     let mut acc_sum = [0.0; 3];
     let mut acc_n = 0usize;
     let mut out = Vec::new();
@@ -38,6 +43,9 @@ pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec
         if j > 0 {
             let dt = log.t_s[j] - log.t_s[j - 1];
             s += dist[j];
+            if dt > crate::log_gaps::MIN_GAP_S {
+                lost_s += dt;
+            }
             for a in 0..3 {
                 turn[a] += log.gyro_dps[j][a] * dt;
             }
@@ -56,6 +64,7 @@ pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec
                 alt: log.gps_alt_m.as_ref().and_then(|a| a[j]),
                 s,
                 turn,
+                lost_s,
                 acc: (acc_n > 0).then(|| acc_sum.map(|x| x / acc_n as f64)),
             });
             acc_sum = [0.0; 3];
