@@ -533,6 +533,8 @@ impl ParamValue {
 pub struct FitReport {
     pub source: String,
     pub rows: usize,
+    /// Of `rows`, those filled across gaps in the log (`crate::log_gaps`).
+    pub rows_filled: usize,
     pub duration_s: f64,
     pub gps_fixes: usize,
     pub model: Vec<String>,
@@ -702,6 +704,7 @@ impl FitReport {
         Self {
             source: sig.source.clone(),
             rows: sig.len(),
+            rows_filled: sig.filled_rows(),
             duration_s: sig.duration(),
             gps_fixes: sig.fixes.len(),
             model: model.effect_ids(),

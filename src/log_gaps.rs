@@ -54,6 +54,16 @@ pub struct Filled {
     pub to_s: f64,
 }
 
+/// ", N of them filled across gaps in the log" after a count of rows where
+/// `filled` rows were, else nothing: what a summary says of the rows.
+pub fn filled_phrase(filled: usize) -> String {
+    if filled == 0 {
+        String::new()
+    } else {
+        format!(", {filled} of them filled across gaps in the log")
+    }
+}
+
 /// The gaps of `t` to fill: `(j, m)`, the row after the gap and the rows
 /// to put before it.
 fn gaps(t: &[f64]) -> Vec<(usize, usize)> {

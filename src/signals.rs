@@ -520,6 +520,19 @@ impl Signals {
         }
     }
 
+    /// How many of the rows were filled across gaps in the log (see
+    /// [`crate::log_gaps`]): no line of the source holds them.
+    pub fn filled_rows(&self) -> usize {
+        self.log_gaps
+            .iter()
+            .map(|&(a, b)| {
+                self.t
+                    .partition_point(|&x| x < b)
+                    .saturating_sub(self.t.partition_point(|&x| x <= a))
+            })
+            .sum()
+    }
+
     /// The ride's mean speed (m/s): its distance over its duration.
     pub fn mean_speed_mps(&self) -> f64 {
         self.distance.iter().sum::<f64>() / self.duration().max(1e-9)

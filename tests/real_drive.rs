@@ -311,6 +311,7 @@ fn ten_seconds_of_rows_lost_are_filled_and_the_turn_across_them_fitted() {
     );
     // Filled at the log's rate: about as many rows as were lost.
     let filled = sig.len() - log.len();
+    assert_eq!(sig.filled_rows(), filled);
     assert!(
         (filled as f64 - (end - first) as f64).abs() < 0.05 * (end - first) as f64,
         "{filled} rows filled for {} lost",

@@ -14,9 +14,10 @@ pub fn source_ui(ui: &mut egui::Ui, ride: &RideView, commands: &mut Vec<Command>
     let origin = &ride.origin;
     ui.heading("Source");
     ui.label(format!(
-        "{} ({} rows, {:.0} s, {} fixes)",
+        "{} ({} rows{}, {:.0} s, {} fixes)",
         origin.kind.map_or("ride-log CSV", |k| k.label()),
         ride.rows,
+        crate::log_gaps::filled_phrase(ride.rows_filled),
         ride.duration_s,
         ride.fixes.len()
     ));

@@ -144,6 +144,8 @@ pub struct ReferenceView {
 pub struct RideView {
     pub source: RideSource,
     pub rows: usize,
+    /// Of `rows`, those filled across gaps in the log (`crate::log_gaps`).
+    pub rows_filled: usize,
     pub duration_s: f64,
     pub t0: f64,
     /// GPS fixes: log time, east, north (m).
@@ -760,6 +762,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
     RideView {
         source: source.clone(),
         rows: sig.len(),
+        rows_filled: sig.filled_rows(),
         duration_s: sig.duration(),
         t0: t_first,
         fixes,

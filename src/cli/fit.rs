@@ -197,8 +197,12 @@ pub(super) fn summary_text(r: &FitReport, verbose: bool) -> String {
     let mut out = String::new();
     _ = writeln!(
         out,
-        "ride      {} ({} rows, {:.0} s, {} GPS fixes)",
-        r.source, r.rows, r.duration_s, r.gps_fixes
+        "ride      {} ({} rows{}, {:.0} s, {} GPS fixes)",
+        r.source,
+        r.rows,
+        gyropath::log_gaps::filled_phrase(r.rows_filled),
+        r.duration_s,
+        r.gps_fixes
     );
     _ = writeln!(out, "model     {}", r.model.join(", "));
     _ = writeln!(out, "attitude  {}", r.attitude);
