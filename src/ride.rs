@@ -131,6 +131,15 @@ impl RideLog {
             .collect();
     }
 
+    /// Leave out the rows `rows`, as a logger that lost them would have
+    /// (the rows either side keep their times).
+    pub fn drop_rows(&mut self, rows: std::ops::Range<usize>) {
+        let mut after = self.clone();
+        after.keep_rows(rows.end.min(self.len())..self.len());
+        self.keep_rows(0..rows.start.min(self.len()));
+        self.append(after);
+    }
+
     /// Keep only the rows from `start` to `end` (s, the log's clock), the
     /// time that a second source (`what`) covers, with a warning saying so
     /// where rows are left out.
@@ -260,6 +269,27 @@ mod tests {
         log.keep_rows(30..100);
         assert_eq!(log.len(), 10);
         assert_eq!(log.t_s[0], before.t_s[50]);
+    }
+
+    #[test]
+    fn dropped_rows_leave_the_rest_whole_and_the_filled_rows_follow_their_rows() {
+        let mut log = crate::testing::winding_log(10.0, 10.0);
+        let before = log.clone();
+        log.drop_rows(20..60);
+        assert_eq!(log.len(), before.len() - 40);
+        assert_eq!(log.t_s[..20], before.t_s[..20]);
+        assert_eq!(log.t_s[20..], before.t_s[60..]);
+        assert_eq!(log.line[20], before.line[60]);
+        assert_eq!(log.fix[20..], before.fix[60..]);
+        assert!(log.channels.iter().all(|(_, c)| c.len() == log.len()));
+        // Filled rows are cut and shifted with the rows, and appended after.
+        let mut filled = before.clone();
+        filled.filled = vec![5..8, 30..40];
+        filled.keep_rows(6..35);
+        assert_eq!(filled.filled, vec![0..2, 24..29]);
+        let other = filled.clone();
+        filled.append(other);
+        assert_eq!(filled.filled, vec![0..2, 24..29, 29..31, 53..58]);
     }
 
     #[test]

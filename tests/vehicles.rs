@@ -238,10 +238,7 @@ fn a_car_whose_rows_are_lost_in_a_bend_comes_out_of_it_on_its_road() {
     let mut log = import::parse(sim.log_csv.as_bytes(), "car.csv").expect("parse");
     let first = log.t_s.partition_point(|&t| t <= 100.0);
     let end = log.t_s.partition_point(|&t| t < 120.0);
-    let mut after = log.clone();
-    after.keep_rows(end..log.len());
-    log.keep_rows(0..first);
-    log.append(after);
+    log.drop_rows(first..end);
     let sig = Arc::new(Signals::from_owned_log(log).expect("signals"));
     assert_eq!(sig.log_gaps.len(), 1);
     let mut fit = Reconstruction::new(sig.clone(), FitSettings::default()).expect("fit");
@@ -312,10 +309,7 @@ fn a_bicycle_whose_rows_are_lost_in_its_sharpest_turn_comes_out_of_it_on_its_pat
         let mut log = whole.clone();
         let first = log.t_s.partition_point(|&t| t <= a);
         let end = log.t_s.partition_point(|&t| t < b);
-        let mut after = log.clone();
-        after.keep_rows(end..log.len());
-        log.keep_rows(0..first);
-        log.append(after);
+        log.drop_rows(first..end);
         // The check leaves the gap out of the course's turns: across it,
         // seed 6's course turn was read as following the roll axis, and
         // the check called z not up.

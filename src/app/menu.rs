@@ -87,10 +87,11 @@ impl GyropathApp {
                 }
                 (None, Some(r)) => {
                     ui.label(format!(
-                        "{}: {:.1} min, {} rows, {} fixes",
+                        "{}: {:.1} min, {} rows{}, {} fixes",
                         r.source.name(),
                         r.duration_s / 60.0,
                         r.rows,
+                        crate::log_gaps::filled_phrase(r.rows_filled),
                         r.fixes.len()
                     ));
                 }
