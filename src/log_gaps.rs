@@ -17,8 +17,8 @@
 //! - the time runs evenly, `t_a + k (t_b - t_a) / (m + 1)`, `k = 1..m`;
 //! - the gyro is the line between the samples either side (the signals then
 //!   treat the filled rows as a gyro stop, `crate::signals`: the turn across
-//!   it is a parameter of the fit, `effects::gyro_stops`, started from the
-//!   fixes around it);
+//!   it is a parameter of the fit, `effects::gyro_stops`, started from
+//!   that line);
 //! - every optional column is empty, so that the signals interpolate the
 //!   odometer, the speeds and the channels across it as across any empty
 //!   field (a cumulative odometer then spreads the gap's distance evenly);
@@ -44,16 +44,6 @@ pub const MIN_GAP_S: f64 = crate::gyro_stops::MIN_STOP_S;
 /// pause) as a success.
 pub const MAX_GAP_S: f64 = 60.0;
 
-/// The rows filled across one gap.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Filled {
-    /// The filled rows' indices in the filled log.
-    pub rows: std::ops::Range<usize>,
-    /// The times of the samples either side (s).
-    pub from_s: f64,
-    pub to_s: f64,
-}
-
 /// ", N of them filled across gaps in the log" after a count of rows where
 /// `filled` rows were, else nothing: what a summary says of the rows.
 pub fn filled_phrase(filled: usize) -> String {
@@ -73,9 +63,6 @@ fn gaps(t: &[f64]) -> Vec<(usize, usize)> {
         return Vec::new();
     }
     let mut steps: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    if steps.is_empty() {
-        return Vec::new();
-    }
     let median = crate::statistics::quantile(&mut steps, 0.5);
     if median <= 0.0 || !median.is_finite() {
         return Vec::new();
@@ -91,24 +78,20 @@ fn gaps(t: &[f64]) -> Vec<(usize, usize)> {
         .collect()
 }
 
-/// Fill `log`'s gaps (see the module), returning the rows filled, in order.
-/// A log without gaps is left as it is.
-pub fn fill(log: &mut RideLog) -> Vec<Filled> {
+/// Fill `log`'s gaps (see the module), the rows filled kept in order in
+/// [`RideLog::filled`] (the samples either side of each are the rows just
+/// outside its range). A log without gaps is left as it is.
+pub fn fill(log: &mut RideLog) {
     let found = gaps(&log.t_s);
     if found.is_empty() {
-        return Vec::new();
+        return;
     }
     // Where each original row goes: row `j` moves down by the rows put
     // before it.
     let mut filled = Vec::with_capacity(found.len());
     let mut added = 0;
     for &(j, m) in &found {
-        let start = j + added;
-        filled.push(Filled {
-            rows: start..start + m,
-            from_s: log.t_s[j - 1],
-            to_s: log.t_s[j],
-        });
+        filled.push(j + added..j + added + m);
         added += m;
     }
     let t = std::mem::take(&mut log.t_s);
@@ -138,8 +121,7 @@ pub fn fill(log: &mut RideLog) -> Vec<Filled> {
     for (_, c) in &mut log.channels {
         *c = spread(c, &found, |_, _, _| None);
     }
-    log.filled = filled.iter().map(|f| f.rows.clone()).collect();
-    filled
+    log.filled = filled;
 }
 
 /// `v` with `m` values `value(j, k, m)` (`k = 1..=m`) put before row `j`
@@ -189,15 +171,9 @@ mod tests {
         // under MIN_GAP_S) after t = 2.6.
         let t = [0.0, 0.1, 0.2, 0.3, 2.3, 2.4, 2.5, 2.6, 3.0, 3.1];
         let mut l = log(&t);
-        let filled = fill(&mut l);
-        assert_eq!(
-            filled,
-            vec![Filled {
-                rows: 4..23,
-                from_s: 0.3,
-                to_s: 2.3
-            }]
-        );
+        fill(&mut l);
+        assert_eq!(l.filled, vec![4..23]);
+        assert_eq!((l.t_s[3], l.t_s[23]), (0.3, 2.3), "the samples either side");
         assert_eq!(l.len(), t.len() + 19);
         for j in 4..23 {
             let want = 0.3 + 0.1 * (j - 3) as f64;
@@ -224,13 +200,15 @@ mod tests {
     fn logs_without_gaps_and_pauses_are_left_as_they_are() {
         let even: Vec<f64> = (0..100).map(|i| i as f64 * 0.01).collect();
         let mut l = log(&even);
-        assert!(fill(&mut l).is_empty());
+        fill(&mut l);
+        assert!(l.filled.is_empty());
         assert_eq!(l.t_s, even);
         // A pause (over MAX_GAP_S) is refused elsewhere, never filled.
         let mut paused = even.clone();
         paused.extend((0..10).map(|i| 100.0 + i as f64 * 0.01));
         let mut l = log(&paused);
-        assert!(fill(&mut l).is_empty());
+        fill(&mut l);
+        assert!(l.filled.is_empty());
         assert_eq!(l.len(), paused.len());
     }
 }

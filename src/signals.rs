@@ -126,7 +126,7 @@ const PULSE_SPEED_S: f64 = 2.0;
 /// nowhere through a 15 s gap, and with the gap's distance free about that
 /// (`effects::gnss_gaps`, a prior of 2 m/s on its mean speed) the fit drove
 /// 224 m where the bicycle rode 60.
-fn pulses_across_gaps(t: &[f64], distance: &mut [f64], filled: &[crate::log_gaps::Filled]) {
+fn pulses_across_gaps(t: &[f64], distance: &mut [f64], filled: &[std::ops::Range<usize>]) {
     let speed = |from: f64, to: f64, distance: &[f64]| -> f64 {
         let rows = t.partition_point(|&x| x <= from)..t.partition_point(|&x| x <= to);
         let (first, last) = (rows.start.max(1), rows.end.min(t.len()));
@@ -137,13 +137,12 @@ fn pulses_across_gaps(t: &[f64], distance: &mut [f64], filled: &[crate::log_gaps
         let moved: f64 = distance[first..last].iter().sum();
         if time > 0.0 { moved / time } else { 0.0 }
     };
-    for f in filled {
-        let before = speed(f.from_s - PULSE_SPEED_S, f.from_s, distance);
-        let after = speed(f.to_s, f.to_s + PULSE_SPEED_S, distance);
-        let length = f.to_s - f.from_s;
-        let end = (f.rows.end + 1).min(t.len());
-        for j in f.rows.start.max(1)..end {
-            let v = before + (after - before) * ((t[j] - f.from_s) / length).clamp(0.0, 1.0);
+    for rows in filled.iter().filter(|r| r.start > 0 && r.end < t.len()) {
+        let (from, to) = (t[rows.start - 1], t[rows.end]);
+        let before = speed(from - PULSE_SPEED_S, from, distance);
+        let after = speed(to, to + PULSE_SPEED_S, distance);
+        for j in rows.start..=rows.end {
+            let v = before + (after - before) * ((t[j] - from) / (to - from)).clamp(0.0, 1.0);
             distance[j] = v * (t[j] - t[j - 1]);
         }
     }
@@ -177,7 +176,7 @@ fn bridge_stops(
     t: &[f64],
     gyro: &mut [Vector3<f64>],
     distance: &[f64],
-    filled: &[crate::log_gaps::Filled],
+    filled: &[std::ops::Range<usize>],
 ) -> Vec<(f64, f64)> {
     let mut runs: Vec<(usize, usize)> = crate::gyro_stops::find(t, |j| gyro[j].into(), distance)
         .into_iter()
@@ -187,8 +186,8 @@ fn bridge_stops(
     runs.extend(
         filled
             .iter()
-            .filter(|f| !f.rows.is_empty())
-            .map(|f| (f.rows.start, f.rows.end - 1)),
+            .filter(|rows| !rows.is_empty())
+            .map(|rows| (rows.start, rows.end - 1)),
     );
     runs.sort_unstable();
     if runs.is_empty() {
@@ -555,17 +554,13 @@ impl Signals {
     /// becomes the rates in place (a 6-hour log is not copied).
     /// The log's gaps are filled first (see [`crate::log_gaps`]).
     pub fn from_owned_log(mut log: RideLog) -> Result<Self, SignalError> {
-        let filled = crate::log_gaps::fill(&mut log);
+        crate::log_gaps::fill(&mut log);
         let gyro_dps = std::mem::take(&mut log.gyro_dps);
-        Self::derive(&log, gyro_dps, &filled)
+        Self::derive(&log, gyro_dps)
     }
 
     /// The signals of `log`, whose gyro column (deg/s) is given apart.
-    fn derive(
-        log: &RideLog,
-        gyro_dps: Vec<[f64; 3]>,
-        filled: &[crate::log_gaps::Filled],
-    ) -> Result<Self, SignalError> {
+    fn derive(log: &RideLog, gyro_dps: Vec<[f64; 3]>) -> Result<Self, SignalError> {
         let file = log.source.clone();
         let unusable = |message: String| SignalError::Unusable {
             file: file.clone(),
@@ -617,9 +612,16 @@ impl Signals {
             odometer_distance_and_jumps(log, |j| gyro[j].map(f64::to_degrees).into());
         let (mut distance, odometer) = distance?;
         if matches!(odometer, Odometer::WheelPulses { .. }) {
-            pulses_across_gaps(&t, &mut distance, filled);
+            pulses_across_gaps(&t, &mut distance, &log.filled);
         }
-        let gyro_stops = bridge_stops(&t, &mut gyro, &distance, filled);
+        let gyro_stops = bridge_stops(&t, &mut gyro, &distance, &log.filled);
+        // The times of the samples either side of each filled gap.
+        let log_gaps: Vec<(f64, f64)> = log
+            .filled
+            .iter()
+            .filter(|rows| rows.start > 0 && rows.end < n)
+            .map(|rows| (t[rows.start - 1], t[rows.end]))
+            .collect();
         if attitude.is_planar() {
             for w in &mut gyro {
                 w.x = 0.0;
@@ -627,17 +629,17 @@ impl Signals {
             }
         }
         let mut warnings = log.warnings.clone();
-        if let Some(longest) = filled
+        if let Some(&(from, to)) = log_gaps
             .iter()
-            .max_by(|a, b| (a.to_s - a.from_s).total_cmp(&(b.to_s - b.from_s)))
+            .max_by(|a, b| (a.1 - a.0).total_cmp(&(b.1 - b.0)))
         {
+            let after = t.partition_point(|&x| x < to);
             warnings.push(format!(
-                "{file}: {} gap(s) in the log of {:.0}-{MAX_GAP_S:.0} s, the longest {:.2} s after t = {:.2} s (line {}): rows are filled across each at the log's rate, and the turn across it is fitted as across a gyro stop",
-                filled.len(),
+                "{file}: {} gap(s) in the log of {:.0}-{MAX_GAP_S:.0} s, the longest {:.2} s after t = {from:.2} s (line {}): rows are filled across each at the log's rate, and the turn across it is fitted as across a gyro stop",
+                log_gaps.len(),
                 crate::log_gaps::MIN_GAP_S,
-                longest.to_s - longest.from_s,
-                longest.from_s,
-                log.line.get(longest.rows.end).copied().unwrap_or(0),
+                to - from,
+                log.line.get(after).copied().unwrap_or(0),
             ));
         }
         if let Some(g) = gaps.longest {
@@ -769,7 +771,7 @@ impl Signals {
             t0_boot_s,
             has_gnss_speed: log.gnss_speed_samples() >= 2,
             gyro_stops,
-            log_gaps: filled.iter().map(|f| (f.from_s, f.to_s)).collect(),
+            log_gaps,
             gap_spread: std::sync::OnceLock::new(),
             coarse_steps: std::sync::OnceLock::new(),
         })

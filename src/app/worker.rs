@@ -155,9 +155,6 @@ pub struct RideView {
     /// Where the gyro stopped answering (log time from, to): the fit
     /// bridges them with free turns (`effects::gyro_stops`).
     pub gyro_stops: Vec<(f64, f64)>,
-    /// Whether some of the stops are gaps in the log, its rows filled
-    /// (`crate::log_gaps`): the shading then says rows were lost too.
-    pub rows_lost: bool,
     /// The effects of the catalogue this ride can take, with what each models.
     pub offered_effects: Vec<(String, String)>,
     pub warnings: Vec<String>,
@@ -768,7 +765,6 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         fixes,
         outages: crate::diagnosis::view::outages(sig),
         gyro_stops: sig.gyro_stops.clone(),
-        rows_lost: !sig.log_gaps.is_empty(),
         offered_effects: crate::effects::offered(sig),
         warnings: sig.warnings.clone(),
         origin,

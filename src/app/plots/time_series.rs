@@ -68,7 +68,7 @@ fn shade_gyro_stops(plot: &mut egui_plot::PlotUi<'_>, ride: &RideView, t0: f64, 
         &ride.gyro_stops,
         t0,
         y,
-        if ride.rows_lost {
+        if ride.rows_filled > 0 {
             "gyro stopped or rows lost"
         } else {
             "gyro stopped"

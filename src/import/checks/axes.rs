@@ -224,7 +224,7 @@ pub(super) const CLEARLY_BETTER: f64 = 2.0;
 /// The axis of `fits` (`fit2` of the course's turn on each axis's turn,
 /// `(beta, R^2, sigma)`) read as the vertical: of the axes that follow the
 /// course about as well as the best (`R^2` at least [`MIN_R2`] and
-/// `1 - R^2 < CLEARLY_BETTER (1 - R^2_best)`), the one that turns the most
+/// `1 - R^2 <= CLEARLY_BETTER (1 - R^2_best)`), the one that turns the most
 /// per degree of course, the least `|beta|`. The vertical carries the whole
 /// turn; another axis sees a share of it, through the vehicle's roll or
 /// pitch or a tilted mount, so it needs a larger `beta` to follow the course,
@@ -508,8 +508,6 @@ pub(super) fn forward_axis(
 mod tests {
     use super::*;
 
-    /// The mix-ups within the ratio's band, nearest first, one of any two
-    /// within 1 %; none near deg/s.
     #[test]
     fn the_vertical_is_the_axis_that_turns_most_among_those_that_follow_the_course() {
         let fits = |fit: [(f64, f64); 3]| -> Vec<(f64, f64, f64)> {
@@ -541,6 +539,8 @@ mod tests {
         );
     }
 
+    /// The mix-ups within the ratio's band, nearest first, one of any two
+    /// within 1 %; none near deg/s.
     #[test]
     fn gyro_unit_confusions_are_named_within_the_ratios_precision() {
         let names = |beta: f64, sigma: f64| -> Vec<&str> {
