@@ -40,6 +40,7 @@ pub mod odometer_jumps;
 pub mod optimisation;
 pub mod pipeline;
 pub mod report;
+pub mod reversing;
 pub mod ride;
 pub mod rotation;
 pub mod signals;

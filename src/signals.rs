@@ -745,6 +745,11 @@ impl Signals {
                 }
             )));
         }
+        let reversals = crate::reversing::find(&t, &dt, |j| gyro[j].z, &distance, &fixes);
+        crate::reversing::apply(&mut distance, &reversals);
+        if let Some(w) = crate::reversing::describe(&file, &reversals) {
+            warnings.push(w);
+        }
         let has_gps_alt = fixes.iter().any(|f| f.up.is_some());
         let channels = log
             .channels
