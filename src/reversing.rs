@@ -34,8 +34,6 @@
 
 use std::ops::Range;
 
-use crate::signals::Fix;
-
 /// Steps slower than this (m/s) are stops, where a vehicle may change
 /// direction: a walking pace's tenth, above a GNSS speed's noise at a
 /// standstill (a few cm/s).
@@ -70,6 +68,9 @@ const MAX_MISFIT_SHARE: f64 = 0.5;
 /// within it of half a turn apart, the other way. Between, nothing.
 const AGREE_RAD: f64 = std::f64::consts::FRAC_PI_3;
 
+/// A GPS fix as its row of the log and its east, north (m).
+pub type RowFix = (usize, [f64; 2]);
+
 /// A stretch the vehicle drove backwards: the steps `steps` (step `j` runs
 /// from row `j - 1` to row `j`), from `from_s` to `to_s`, `metres` long.
 #[derive(Clone, Debug, PartialEq)]
@@ -102,13 +103,14 @@ impl Stretch {
 /// The stretches of a log, `t` its times, `dt` its steps and `distance`
 /// the distance of each step (all `>= 0`): its reversals (none when the
 /// distance has a sign already, some step being negative, or nothing
-/// decides). `yaw_rate(j)` is step `j`'s rate about the vertical (rad/s).
+/// decides). `yaw_rate(j)` is step `j`'s rate about the vertical (rad/s);
+/// `fixes` are the GPS fixes as their rows and east, north (m), in order.
 pub fn find(
     t: &[f64],
     dt: &[f64],
     yaw_rate: impl Fn(usize) -> f64,
     distance: &[f64],
-    fixes: &[Fix],
+    fixes: &[RowFix],
 ) -> Vec<Reversal> {
     let n = t.len().min(dt.len()).min(distance.len());
     if n < 2 || distance.iter().any(|&d| d < 0.0) {
@@ -137,13 +139,12 @@ pub fn find(
     let track = dead_reckoned(n, dt, &yaw_rate, distance, &moving);
     // The fixes' rotation onto the track over rows `rows`, where they match.
     let rotation = |rows: Range<usize>| -> Option<f64> {
-        let (a, b) = (t[rows.start], t[rows.end]);
-        let from = fixes.partition_point(|f| f.t < a);
-        let to = fixes.partition_point(|f| f.t <= b);
+        let from = fixes.partition_point(|f| f.0 < rows.start);
+        let to = fixes.partition_point(|f| f.0 <= rows.end);
         matched_rotation(
             fixes[from..to]
                 .iter()
-                .map(|f| (track[f.row.min(n - 1)], f.en)),
+                .map(|&(row, en)| (track[row.min(n - 1)], en)),
         )
     };
     // Each stretch's rows next to its start and end, each with what it
@@ -324,12 +325,12 @@ fn rows_after(t: &[f64], row: usize, seconds: f64) -> usize {
     row + t[row..].partition_point(|&x| x <= t[row] + seconds) - 1
 }
 
-/// The warning that says what was found, `None` for nothing.
-pub fn describe(file: &str, found: &[Reversal]) -> Option<String> {
+/// What was found, in a sentence; `None` for nothing.
+pub fn describe(found: &[Reversal]) -> Option<String> {
     let longest = found.iter().max_by(|a, b| a.metres.total_cmp(&b.metres))?;
     let total: f64 = found.iter().map(|r| r.metres).sum();
     Some(format!(
-        "{file}: the distance has no sign, and the GPS track says the vehicle drove backwards over {} stretch(es) between stops, {total:.1} m in all, the longest {:.1} m at {:.1}-{:.1} s: the path moves backwards there",
+        "the distance has no sign, and the GPS track says the vehicle drove backwards over {} stretch(es) between stops, {total:.1} m in all, the longest {:.1} m at {:.1}-{:.1} s: the path moves backwards there",
         found.len(),
         longest.metres,
         longest.from_s,
@@ -357,7 +358,7 @@ mod tests {
         seconds: f64,
         speed: impl Fn(f64) -> f64,
         error: impl Fn(usize) -> [f64; 2],
-    ) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<Fix>) {
+    ) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<RowFix>) {
         let n = (seconds * 10.0) as usize + 1;
         let t: Vec<f64> = (0..n).map(|j| j as f64 * 0.1).collect();
         let mut dt = vec![0.0; n];
@@ -374,16 +375,7 @@ mod tests {
             .enumerate()
             .map(|(k, row)| {
                 let e = error(k);
-                Fix {
-                    row,
-                    t: t[row],
-                    en: [x[row] + e[0], e[1]],
-                    up: None,
-                    baro: None,
-                    hacc: None,
-                    vacc: None,
-                    hdop: None,
-                }
+                (row, [x[row] + e[0], e[1]])
             })
             .collect();
         (t, dt, distance, fixes)
@@ -419,7 +411,7 @@ mod tests {
         // The step into the stand (t = 4.9-5.0 s) still moves backwards.
         assert!(signed[1..=50].iter().all(|&d| d < 0.0));
         assert!(signed[51..].iter().all(|&d| d >= 0.0));
-        let said = describe("car.csv", &found).unwrap_or_default();
+        let said = describe(&found).unwrap_or_default();
         assert!(said.contains("7.9 m at 0.0-5.0 s"), "{said}");
     }
 

@@ -745,10 +745,11 @@ impl Signals {
                 }
             )));
         }
-        let reversals = crate::reversing::find(&t, &dt, |j| gyro[j].z, &distance, &fixes);
+        let at_fixes: Vec<crate::reversing::RowFix> = fixes.iter().map(|f| (f.row, f.en)).collect();
+        let reversals = crate::reversing::find(&t, &dt, |j| gyro[j].z, &distance, &at_fixes);
         crate::reversing::apply(&mut distance, &reversals);
-        if let Some(w) = crate::reversing::describe(&file, &reversals) {
-            warnings.push(w);
+        if let Some(w) = crate::reversing::describe(&reversals) {
+            warnings.push(format!("{file}: {w}"));
         }
         let has_gps_alt = fixes.iter().any(|f| f.up.is_some());
         let channels = log

@@ -381,7 +381,8 @@ fn a_bicycle_whose_rows_are_lost_in_its_sharpest_turn_comes_out_of_it_on_its_pat
 /// against 0.7-1.8 m for the same drive on its signed wheel speed. The
 /// stretch before the first stop is found backwards by the GPS track
 /// against the gyro's heading (`reversing`), and the path then ends where
-/// the signed speed's does. No other stretch of these drives is reversed.
+/// the signed speed's does. No other stretch of these drives is reversed,
+/// and `gyropath check` says what the fit does.
 #[test]
 fn a_car_backing_out_of_its_bay_on_an_unsigned_speed_is_driven_backwards_there() {
     for seed in [3, 4, 5] {
@@ -398,6 +399,13 @@ fn a_car_backing_out_of_its_bay_on_an_unsigned_speed_is_driven_backwards_there()
             let mut log = import::parse(sim.log_csv.as_bytes(), "car.csv").expect("parse");
             if unsigned {
                 log.speed_mps = None;
+                // `gyropath check` says it too.
+                let said = import::checks::check(&log)
+                    .verdicts
+                    .iter()
+                    .filter(|v| v.subject == "direction" && v.message.contains("backwards"))
+                    .count();
+                assert_eq!(said, 1, "seed {seed}: the check");
             }
             let sig = Arc::new(Signals::from_owned_log(log).expect("signals"));
             let reversed: Vec<&String> = sig

@@ -42,7 +42,9 @@ use axes::{
     accelerometer_vertical, course_vertical, forward_axis, gyro_units, signed, unit_factor,
 };
 use log::{sample_rate, saturation, stuck_gyro};
-use track::{AtFix, Stretches, altitude, gps_units, odometer_scale, quality, stretches, summarise};
+use track::{
+    AtFix, Stretches, altitude, direction, gps_units, odometer_scale, quality, stretches, summarise,
+};
 
 /// How much a verdict matters.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Serialize)]
@@ -283,6 +285,9 @@ pub fn check(log: &RideLog) -> CheckReport {
     let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
     report.forward = forward;
     odometer_scale(&fixes, &stretches.idx, &mut report);
+    if let Some(v) = vertical {
+        direction(log, &distance, &blunders, (v.axis, v.sign), &mut report);
+    }
     gps_units(log, &fixes, &mut report);
     altitude(log, &fixes, &mut report);
     quality(log, &mut report);

@@ -391,3 +391,38 @@ pub(super) fn quality(log: &RideLog, report: &mut CheckReport) {
     };
     report.say("GPS quality", level, format!("{}{note}", parts.join("; ")));
 }
+
+/// Stretches between stops that the GPS track says were driven backwards
+/// on a distance without a sign ([`crate::reversing`], as the fit's signals
+/// find them), about `up` (the vertical axis and its sign): said, for the
+/// fit drives them backwards.
+pub(super) fn direction(
+    log: &RideLog,
+    distance: &[f64],
+    blunders: &Blunders,
+    up: (usize, f64),
+    report: &mut CheckReport,
+) {
+    let t = &log.t_s;
+    let mut dt = vec![0.0; t.len()];
+    for j in 1..t.len() {
+        dt[j] = t[j] - t[j - 1];
+    }
+    let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
+    let Some(first) = (0..log.len()).find_map(usable) else {
+        return;
+    };
+    let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
+    let fixes: Vec<crate::reversing::RowFix> = (0..log.len())
+        .filter_map(|j| {
+            let (lat, lon) = usable(j)?;
+            let p = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
+            Some((j, [p.x, p.y]))
+        })
+        .collect();
+    let rate = |j: usize| up.1 * log.gyro_dps[j][up.0].to_radians();
+    let found = crate::reversing::find(t, &dt, rate, distance, &fixes);
+    if let Some(said) = crate::reversing::describe(&found) {
+        report.say("direction", Level::Info, said);
+    }
+}
