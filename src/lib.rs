@@ -43,6 +43,7 @@ pub mod report;
 pub mod reversing;
 pub mod ride;
 pub mod rotation;
+pub mod sensor_turns;
 pub mod signals;
 pub mod simulation;
 pub mod standing;

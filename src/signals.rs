@@ -171,12 +171,16 @@ fn pulses_across_gaps(t: &[f64], distance: &mut [f64], filled: &[std::ops::Range
 ///   its fixes.
 ///
 /// The rows `filled` across the log's gaps (see [`crate::log_gaps`]) are
-/// bridged alike: the gyro did not answer there either.
+/// bridged alike: the gyro did not answer there either; and so are the
+/// rows `turned`, `(first, last)`, where the sensor turned without the
+/// vehicle (see [`crate::sensor_turns`]): the gyro answered for the
+/// sensor, not for the vehicle.
 fn bridge_stops(
     t: &[f64],
     gyro: &mut [Vector3<f64>],
     distance: &[f64],
     filled: &[std::ops::Range<usize>],
+    turned: &[(usize, usize)],
 ) -> Vec<(f64, f64)> {
     let mut runs: Vec<(usize, usize)> = crate::gyro_stops::find(t, |j| gyro[j].into(), distance)
         .into_iter()
@@ -189,6 +193,15 @@ fn bridge_stops(
             .filter(|rows| !rows.is_empty())
             .map(|rows| (rows.start, rows.end - 1)),
     );
+    // The sensor's own turns (see `crate::sensor_turns`), where no stop or
+    // gap is bridged already.
+    let apart = |a: &(usize, usize), b: &(usize, usize)| a.1 + 1 < b.0 || b.1 + 1 < a.0;
+    let free: Vec<(usize, usize)> = turned
+        .iter()
+        .filter(|s| s.0 <= s.1 && runs.iter().all(|r| apart(r, s)))
+        .copied()
+        .collect();
+    runs.extend(free);
     runs.sort_unstable();
     if runs.is_empty() {
         return Vec::new();
@@ -614,7 +627,6 @@ impl Signals {
         if matches!(odometer, Odometer::WheelPulses { .. }) {
             pulses_across_gaps(&t, &mut distance, &log.filled);
         }
-        let gyro_stops = bridge_stops(&t, &mut gyro, &distance, &log.filled);
         // The times of the samples either side of each filled gap.
         let log_gaps: Vec<(f64, f64)> = log
             .filled
@@ -622,12 +634,6 @@ impl Signals {
             .filter(|rows| rows.start > 0 && rows.end < n)
             .map(|rows| (t[rows.start - 1], t[rows.end]))
             .collect();
-        if attitude.is_planar() {
-            for w in &mut gyro {
-                w.x = 0.0;
-                w.y = 0.0;
-            }
-        }
         let mut warnings = log.warnings.clone();
         if let Some(&(from, to)) = log_gaps
             .iter()
@@ -750,6 +756,21 @@ impl Signals {
         crate::reversing::apply(&mut distance, &reversals);
         if let Some(w) = crate::reversing::describe(&reversals) {
             warnings.push(format!("{file}: {w}"));
+        }
+        let turns = crate::sensor_turns::find(&t, &dt, |j| gyro[j].z, &distance, &at_fixes);
+        if let Some(w) = crate::sensor_turns::describe(&turns) {
+            warnings.push(format!("{file}: {w}"));
+        }
+        let turned: Vec<(usize, usize)> = turns
+            .iter()
+            .map(|s| (s.first_row + 1, s.last_row))
+            .collect();
+        let gyro_stops = bridge_stops(&t, &mut gyro, &distance, &log.filled, &turned);
+        if attitude.is_planar() {
+            for w in &mut gyro {
+                w.x = 0.0;
+                w.y = 0.0;
+            }
         }
         let has_gps_alt = fixes.iter().any(|f| f.up.is_some());
         let channels = log

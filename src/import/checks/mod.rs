@@ -43,7 +43,8 @@ use axes::{
 };
 use log::{sample_rate, saturation, stuck_gyro};
 use track::{
-    AtFix, Stretches, altitude, direction, gps_units, odometer_scale, quality, stretches, summarise,
+    AtFix, Stretches, altitude, direction_and_turns, gps_units, local_fixes, odometer_scale,
+    quality, stretches, summarise,
 };
 
 /// How much a verdict matters.
@@ -222,11 +223,17 @@ pub fn check(log: &RideLog) -> CheckReport {
         log.gps_hacc_m.as_deref(),
         measured.as_deref(),
     );
-    let distance = measured.unwrap_or_else(|| vec![0.0; log.len()]);
+    let mut distance = measured.unwrap_or_else(|| vec![0.0; log.len()]);
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
     }
-    let fixes = summarise(log, &blunders, &distance);
+    let turned = direction_and_turns(
+        log,
+        &mut distance,
+        &local_fixes(log, &blunders),
+        &mut report,
+    );
+    let fixes = summarise(log, &blunders, &distance, &turned);
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.
@@ -285,9 +292,6 @@ pub fn check(log: &RideLog) -> CheckReport {
     let forward = vertical.and_then(|v| forward_axis(&fixes, v, &mut report));
     report.forward = forward;
     odometer_scale(&fixes, &stretches.idx, &mut report);
-    if let Some(v) = vertical {
-        direction(log, &distance, &blunders, (v.axis, v.sign), &mut report);
-    }
     gps_units(log, &fixes, &mut report);
     altitude(log, &fixes, &mut report);
     quality(log, &mut report);

@@ -20,14 +20,21 @@ pub(super) struct AtFix {
     /// Mean acceleration since the previous fix, per logged axis.
     pub(super) acc: Option<[f64; 3]>,
     /// Time (s) the log lost its rows before this fix, in gaps longer than
-    /// [`crate::log_gaps::MIN_GAP_S`]: how the gyro turned across them
-    /// is not known (the fit fills and bridges them).
+    /// [`crate::log_gaps::MIN_GAP_S`], or the sensor turned without the
+    /// vehicle: how the vehicle turned across them the gyro does not tell
+    /// (the fit bridges them).
     pub(super) lost_s: f64,
 }
 
 /// The fixes of `log` but its `blunders`, with what happened between them
-/// (`dist`: the odometer's distance per step, zero where it has none).
-pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec<AtFix> {
+/// (`dist`: the odometer's distance per step, zero where it has none;
+/// `turned`: the steps where the sensor turned alone).
+pub(super) fn summarise(
+    log: &RideLog,
+    blunders: &Blunders,
+    dist: &[f64],
+    turned: &[(usize, usize)],
+) -> Vec<AtFix> {
     let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
     let Some(first) = (0..log.len()).find_map(usable) else {
         return Vec::new();
@@ -43,7 +50,9 @@ pub(super) fn summarise(log: &RideLog, blunders: &Blunders, dist: &[f64]) -> Vec
         if j > 0 {
             let dt = log.t_s[j] - log.t_s[j - 1];
             s += dist[j];
-            if dt > crate::log_gaps::MIN_GAP_S {
+            if dt > crate::log_gaps::MIN_GAP_S
+                || turned.iter().any(|&(a, b)| (a..=b).contains(&j))
+            {
                 lost_s += dt;
             }
             for a in 0..3 {
@@ -392,37 +401,49 @@ pub(super) fn quality(log: &RideLog, report: &mut CheckReport) {
     report.say("GPS quality", level, format!("{}{note}", parts.join("; ")));
 }
 
-/// Stretches between stops that the GPS track says were driven backwards
-/// on a distance without a sign ([`crate::reversing`], as the fit's signals
-/// find them), about `up` (the vertical axis and its sign): said, for the
-/// fit drives them backwards.
-pub(super) fn direction(
-    log: &RideLog,
-    distance: &[f64],
-    blunders: &Blunders,
-    up: (usize, f64),
-    report: &mut CheckReport,
-) {
-    let t = &log.t_s;
-    let mut dt = vec![0.0; t.len()];
-    for j in 1..t.len() {
-        dt[j] = t[j] - t[j - 1];
-    }
+/// The usable fixes of `log` (not `blunders`) as their rows and east, north
+/// (m) about the first.
+pub(super) fn local_fixes(log: &RideLog, blunders: &Blunders) -> Vec<crate::reversing::RowFix> {
     let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
     let Some(first) = (0..log.len()).find_map(usable) else {
-        return;
+        return Vec::new();
     };
     let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
-    let fixes: Vec<crate::reversing::RowFix> = (0..log.len())
+    (0..log.len())
         .filter_map(|j| {
             let (lat, lon) = usable(j)?;
             let p = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
             Some((j, [p.x, p.y]))
         })
-        .collect();
-    let rate = |j: usize| up.1 * log.gyro_dps[j][up.0].to_radians();
-    let found = crate::reversing::find(t, &dt, rate, distance, &fixes);
-    if let Some(said) = crate::reversing::describe(&found) {
+        .collect()
+}
+
+/// What the fit's signals find of the vehicle's direction and the sensor's
+/// own turns, about the log's z as they take it: the stretches the GPS
+/// track says were driven backwards on a distance without a sign
+/// ([`crate::reversing`]; `distance` is signed after) and the steps
+/// `(first, last)` where the sensor turned without the vehicle
+/// ([`crate::sensor_turns`]), each said.
+pub(super) fn direction_and_turns(
+    log: &RideLog,
+    distance: &mut [f64],
+    fixes: &[crate::reversing::RowFix],
+    report: &mut CheckReport,
+) -> Vec<(usize, usize)> {
+    let t = &log.t_s;
+    let mut dt = vec![0.0; t.len()];
+    for j in 1..t.len() {
+        dt[j] = t[j] - t[j - 1];
+    }
+    let rate = |j: usize| log.gyro_dps[j][2].to_radians();
+    let reversed = crate::reversing::find(t, &dt, rate, distance, fixes);
+    crate::reversing::apply(distance, &reversed);
+    if let Some(said) = crate::reversing::describe(&reversed) {
         report.say("direction", Level::Info, said);
     }
+    let turns = crate::sensor_turns::find(t, &dt, rate, distance, fixes);
+    if let Some(said) = crate::sensor_turns::describe(&turns) {
+        report.say("sensor turns", Level::Warning, said);
+    }
+    turns.iter().map(|s| (s.first_row + 1, s.last_row)).collect()
 }
