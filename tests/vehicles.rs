@@ -374,6 +374,30 @@ fn a_bicycle_whose_rows_are_lost_in_its_sharpest_turn_comes_out_of_it_on_its_pat
     eprintln!("the truth inside the 95 % band on {share:.3} of the gaps' rows");
 }
 
+/// A 5-minute car drive with the GNSS receiver's ground speed logged
+/// beside its signed wheel speed, without GPS outages.
+fn gnss_speed_car(seed: u64) -> SimulatedRide {
+    simulate(&SimConfig {
+        seed,
+        duration_s: 300.0,
+        vehicle: Vehicle::Car,
+        gnss_speed: true,
+        outages: false,
+        ..SimConfig::default()
+    })
+    .expect("simulate")
+}
+
+/// The drive's log, its distance from the GNSS speed (no sign) where
+/// `unsigned`, else from the wheel speed.
+fn car_log(sim: &SimulatedRide, unsigned: bool) -> gyropath::ride::RideLog {
+    let mut log = import::parse(sim.log_csv.as_bytes(), "car.csv").expect("parse");
+    if unsigned {
+        log.speed_mps = None;
+    }
+    log
+}
+
 /// A car drive logged with the GNSS receiver's ground speed (a phone's, a
 /// camera's), which has no sign, starts by backing 6-9 m out of its bay.
 /// Read forwards, the noise search took the misfit for a GPS wander of
@@ -386,19 +410,10 @@ fn a_bicycle_whose_rows_are_lost_in_its_sharpest_turn_comes_out_of_it_on_its_pat
 #[test]
 fn a_car_backing_out_of_its_bay_on_an_unsigned_speed_is_driven_backwards_there() {
     for seed in [3, 4, 5] {
-        let config = SimConfig {
-            seed,
-            duration_s: 300.0,
-            vehicle: Vehicle::Car,
-            gnss_speed: true,
-            outages: false,
-            ..SimConfig::default()
-        };
-        let sim = simulate(&config).expect("simulate");
+        let sim = gnss_speed_car(seed);
         let rms = |unsigned: bool| {
-            let mut log = import::parse(sim.log_csv.as_bytes(), "car.csv").expect("parse");
+            let log = car_log(&sim, unsigned);
             if unsigned {
-                log.speed_mps = None;
                 // `gyropath check` says it too.
                 let said = import::checks::check(&log)
                     .verdicts
@@ -447,18 +462,9 @@ fn a_car_backing_out_of_its_bay_on_an_unsigned_speed_is_driven_backwards_there()
 #[test]
 fn a_helmet_cameras_looks_to_the_side_are_not_taken_for_the_vehicles_turns() {
     for seed in [4, 5] {
-        let sim = simulate(&SimConfig {
-            seed,
-            duration_s: 300.0,
-            vehicle: Vehicle::Car,
-            gnss_speed: true,
-            outages: false,
-            ..SimConfig::default()
-        })
-        .expect("simulate");
+        let sim = gnss_speed_car(seed);
         let rms = |looks: bool| {
-            let mut log = import::parse(sim.log_csv.as_bytes(), "car.csv").expect("parse");
-            log.speed_mps = None;
+            let mut log = car_log(&sim, true);
             if looks {
                 for (t, g) in log.t_s.iter().zip(log.gyro_dps.iter_mut()) {
                     let k = (t - 20.0).rem_euclid(60.0);

@@ -196,6 +196,36 @@ impl CheckReport {
     }
 }
 
+/// The course test with the stretches across `turns` left out, where the
+/// sensor turned without the vehicle about the log's z (the fit bridges
+/// them): taken, and the turns said, only where it finds z up. Found about
+/// an axis that is not up they mean nothing (a pitch axis read as z
+/// "turned alone" for 12 s), and leaving stretches out for them lost a
+/// car's vertical.
+fn course_without_sensor_turns(
+    log: &RideLog,
+    blunders: &crate::blunders::Blunders,
+    distance: &[f64],
+    turns: &[crate::sensor_turns::SensorTurn],
+    stretches: &Stretches,
+    report: &mut CheckReport,
+) -> Option<(AxisFinding, f64)> {
+    let said = crate::sensor_turns::describe(turns)?;
+    let turned: Vec<(usize, usize)> = turns
+        .iter()
+        .map(|s| (s.first_row + 1, s.last_row))
+        .collect();
+    let fixes = summarise(log, blunders, distance, &turned);
+    let mut trial = CheckReport::default();
+    let found = course_vertical(&fixes, stretches, &mut trial)?;
+    if found.0.axis != 2 || found.0.sign < 0.0 {
+        return None;
+    }
+    report.say("sensor turns", Level::Warning, said);
+    report.verdicts.extend(trial.verdicts);
+    Some(found)
+}
+
 /// Check a log.
 pub fn check(log: &RideLog) -> CheckReport {
     let mut report = CheckReport::default();
@@ -227,18 +257,20 @@ pub fn check(log: &RideLog) -> CheckReport {
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
     }
-    let turned = direction_and_turns(
+    let turns = direction_and_turns(
         log,
         &mut distance,
         &local_fixes(log, &blunders),
         &mut report,
     );
-    let fixes = summarise(log, &blunders, &distance, &turned);
+    let fixes = summarise(log, &blunders, &distance, &[]);
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.
     let stretches = stretches(&fixes);
-    let course = course_vertical(&fixes, &stretches, &mut report);
+    let course =
+        course_without_sensor_turns(log, &blunders, &distance, &turns, &stretches, &mut report)
+            .or_else(|| course_vertical(&fixes, &stretches, &mut report));
     let vertical = match (accel_up, course) {
         (Some(a), Some((c, _))) if a.axis != c.axis || a.sign != c.sign => {
             report.say(

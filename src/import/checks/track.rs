@@ -50,8 +50,7 @@ pub(super) fn summarise(
         if j > 0 {
             let dt = log.t_s[j] - log.t_s[j - 1];
             s += dist[j];
-            if dt > crate::log_gaps::MIN_GAP_S
-                || turned.iter().any(|&(a, b)| (a..=b).contains(&j))
+            if dt > crate::log_gaps::MIN_GAP_S || turned.iter().any(|&(a, b)| (a..=b).contains(&j))
             {
                 lost_s += dt;
             }
@@ -421,15 +420,15 @@ pub(super) fn local_fixes(log: &RideLog, blunders: &Blunders) -> Vec<crate::reve
 /// What the fit's signals find of the vehicle's direction and the sensor's
 /// own turns, about the log's z as they take it: the stretches the GPS
 /// track says were driven backwards on a distance without a sign
-/// ([`crate::reversing`]; `distance` is signed after) and the steps
-/// `(first, last)` where the sensor turned without the vehicle
-/// ([`crate::sensor_turns`]), each said.
+/// ([`crate::reversing`], said; `distance` is signed after), and where the
+/// sensor turned without the vehicle ([`crate::sensor_turns`]), for the
+/// caller to say where z proves up.
 pub(super) fn direction_and_turns(
     log: &RideLog,
     distance: &mut [f64],
     fixes: &[crate::reversing::RowFix],
     report: &mut CheckReport,
-) -> Vec<(usize, usize)> {
+) -> Vec<crate::sensor_turns::SensorTurn> {
     let t = &log.t_s;
     let mut dt = vec![0.0; t.len()];
     for j in 1..t.len() {
@@ -441,9 +440,5 @@ pub(super) fn direction_and_turns(
     if let Some(said) = crate::reversing::describe(&reversed) {
         report.say("direction", Level::Info, said);
     }
-    let turns = crate::sensor_turns::find(t, &dt, rate, distance, fixes);
-    if let Some(said) = crate::sensor_turns::describe(&turns) {
-        report.say("sensor turns", Level::Warning, said);
-    }
-    turns.iter().map(|s| (s.first_row + 1, s.last_row)).collect()
+    crate::sensor_turns::find(t, &dt, rate, distance, fixes)
 }
