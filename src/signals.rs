@@ -302,6 +302,11 @@ pub struct Signals {
     /// the times `(t_a, t_b)` of the samples either side; each is also one
     /// of the [`Signals::gyro_stops`].
     pub log_gaps: Vec<(f64, f64)>,
+    /// Where the sensor turned without the vehicle (see
+    /// [`crate::sensor_turns`]), as the times of the fixes either side;
+    /// each is also one of the [`Signals::gyro_stops`] (unless a stop or a
+    /// gap there is bridged already).
+    pub sensor_turns: Vec<(f64, f64)>,
     /// Per row, the spread (m^2) of the distance inside the GNSS-speed gaps
     /// that no parameter carries (`effects::gnss_gaps`), filled by the first
     /// model built on these signals: it depends on them alone, and the noise
@@ -799,6 +804,7 @@ impl Signals {
             has_gnss_speed: log.gnss_speed_samples() >= 2,
             gyro_stops,
             log_gaps,
+            sensor_turns: turns.iter().map(|s| (s.from_s, s.to_s)).collect(),
             gap_spread: std::sync::OnceLock::new(),
             coarse_steps: std::sync::OnceLock::new(),
         })
@@ -899,6 +905,7 @@ impl Signals {
             has_gnss_speed: self.has_gnss_speed,
             gyro_stops: self.gyro_stops.clone(),
             log_gaps: self.log_gaps.clone(),
+            sensor_turns: self.sensor_turns.clone(),
             channels,
             odometer: self.odometer.clone(),
             attitude: self.attitude.clone(),

@@ -1106,3 +1106,65 @@ fn a_ride_with_rows_lost_opens_with_the_gap_bridged() {
         ride.warnings
     );
 }
+
+/// A car drive filmed from a helmet (simulated, seed 4, 5 minutes): the
+/// sensor looks 30 deg to alternate sides for 2 s each minute. The app's
+/// ride knows the looks as bridged stops, which the time plots shade as
+/// the sensor turning alone, and its warnings say so.
+#[test]
+fn a_helmet_cameras_looks_open_bridged() {
+    let sim = gyropath::simulation::simulate(&gyropath::simulation::SimConfig {
+        seed: 4,
+        duration_s: 300.0,
+        vehicle: gyropath::simulation::Vehicle::Car,
+        outages: false,
+        ..Default::default()
+    })
+    .expect("simulate");
+    let mut out = String::new();
+    let mut gz = None;
+    for line in sim.log_csv.lines() {
+        if line.starts_with('#') {
+            out.push_str(line);
+        } else if gz.is_none() {
+            gz = line.split(',').position(|c| c == "gz_dps");
+            out.push_str(line);
+        } else {
+            let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+            let t: f64 = cells[0].parse().expect("time");
+            let (k, side) = ((t - 20.0).rem_euclid(60.0), ((t - 20.0) / 60.0).floor());
+            let look = if side < 0.0 {
+                0.0
+            } else if k < 1.0 {
+                30.0
+            } else if (3.0..4.0).contains(&k) {
+                -30.0
+            } else {
+                0.0
+            } * if side as i64 % 2 == 0 { 1.0 } else { -1.0 };
+            let at = gz.expect("a gz_dps column");
+            let rate: f64 = cells[at].parse().expect("gz");
+            cells[at] = format!("{:.4}", rate + look);
+            out.push_str(&cells.join(","));
+        }
+        out.push('\n');
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("helmet.csv");
+    std::fs::write(&path, out).expect("write");
+    let h = the_sample_then(path, "helmet");
+    let ride = h.state().ride.as_ref().expect("ride");
+    assert!(ride.sensor_turns >= 4, "{}", ride.sensor_turns);
+    assert!(
+        ride.gyro_stops.len() >= ride.sensor_turns,
+        "{:?}",
+        ride.gyro_stops
+    );
+    assert!(
+        ride.warnings
+            .iter()
+            .any(|w| w.contains("turned without the vehicle")),
+        "{:?}",
+        ride.warnings
+    );
+}

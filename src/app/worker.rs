@@ -155,6 +155,9 @@ pub struct RideView {
     /// Where the gyro stopped answering (log time from, to): the fit
     /// bridges them with free turns (`effects::gyro_stops`).
     pub gyro_stops: Vec<(f64, f64)>,
+    /// Of `gyro_stops`, how many are where the sensor turned without the
+    /// vehicle (`crate::sensor_turns`).
+    pub sensor_turns: usize,
     /// The effects of the catalogue this ride can take, with what each models.
     pub offered_effects: Vec<(String, String)>,
     pub warnings: Vec<String>,
@@ -760,6 +763,7 @@ fn ride_view(source: &RideSource, sig: &Signals, origin: Origin) -> RideView {
         source: source.clone(),
         rows: sig.len(),
         rows_filled: sig.filled_rows(),
+        sensor_turns: sig.sensor_turns.len(),
         duration_s: sig.duration(),
         t0: t_first,
         fixes,

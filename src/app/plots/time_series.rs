@@ -59,20 +59,28 @@ fn shade(
     }
 }
 
-/// Where the gyro stopped answering or the log lost its rows (see
-/// [`RideView::gyro_stops`]), shaded
+/// Where the gyro stopped answering, the log lost its rows or the sensor
+/// turned without the vehicle (see [`RideView::gyro_stops`]), shaded
 /// more strongly than an outage: there are few, and the fit's turns are free.
 fn shade_gyro_stops(plot: &mut egui_plot::PlotUi<'_>, ride: &RideView, t0: f64, y: (f64, f64)) {
+    let mut causes = vec!["gyro stopped"];
+    if ride.rows_filled > 0 {
+        causes.push("rows lost");
+    }
+    if ride.sensor_turns > 0 {
+        causes.push("sensor turned alone");
+    }
+    let label = match causes.as_slice() {
+        [one] => one.to_string(),
+        [rest @ .., last] => format!("{} or {last}", rest.join(", ")),
+        [] => String::new(),
+    };
     shade(
         plot,
         &ride.gyro_stops,
         t0,
         y,
-        if ride.rows_filled > 0 {
-            "gyro stopped or rows lost"
-        } else {
-            "gyro stopped"
-        },
+        &label,
         GYRO_STOP.gamma_multiply(0.35),
     );
 }
