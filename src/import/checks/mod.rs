@@ -198,10 +198,9 @@ impl CheckReport {
 
 /// The course test with the stretches across `turns` left out, where the
 /// sensor turned without the vehicle about the log's z (the fit bridges
-/// them): taken, and the turns said, only where it finds z up. Found about
-/// an axis that is not up they mean nothing (a pitch axis read as z
-/// "turned alone" for 12 s), and leaving stretches out for them lost a
-/// car's vertical.
+/// them): taken only where it finds z up. Found about an axis that is not
+/// up they mean nothing (a pitch axis read as z "turned alone" for 12 s),
+/// and leaving stretches out for them lost a car's vertical.
 fn course_without_sensor_turns(
     log: &RideLog,
     blunders: &crate::blunders::Blunders,
@@ -210,7 +209,9 @@ fn course_without_sensor_turns(
     stretches: &Stretches,
     report: &mut CheckReport,
 ) -> Option<(AxisFinding, f64)> {
-    let said = crate::sensor_turns::describe(turns)?;
+    if turns.is_empty() {
+        return None;
+    }
     let turned: Vec<(usize, usize)> = turns
         .iter()
         .map(|s| (s.first_row + 1, s.last_row))
@@ -221,7 +222,6 @@ fn course_without_sensor_turns(
     if found.0.axis != 2 || found.0.sign < 0.0 {
         return None;
     }
-    report.say("sensor turns", Level::Warning, said);
     report.verdicts.extend(trial.verdicts);
     Some(found)
 }
@@ -271,6 +271,13 @@ pub fn check(log: &RideLog) -> CheckReport {
     let course =
         course_without_sensor_turns(log, &blunders, &distance, &turns, &stretches, &mut report)
             .or_else(|| course_vertical(&fixes, &stretches, &mut report));
+    // The sensor's own turns, said where z (about which they were found, as
+    // the fit finds them) is up by the course.
+    if course.is_some_and(|(c, _)| c.axis == 2 && c.sign > 0.0)
+        && let Some(said) = crate::sensor_turns::describe(&turns)
+    {
+        report.say("sensor turns", Level::Warning, said);
+    }
     let vertical = match (accel_up, course) {
         (Some(a), Some((c, _))) if a.axis != c.axis || a.sign != c.sign => {
             report.say(
