@@ -176,7 +176,7 @@ pub fn find(
     let relation: Vec<Option<f64>> = (0..stretches.len() - 1)
         .map(|k| {
             let (a, b) = (rotations[k][1]?, rotations[k + 1][0]?);
-            let apart = wrap(b - a).abs();
+            let apart = crate::rotation::wrap_pi(b - a).abs();
             if apart <= AGREE_RAD {
                 Some(1.0)
             } else if apart >= std::f64::consts::PI - AGREE_RAD {
@@ -325,13 +325,6 @@ fn moving(dt: &[f64], distance: &[f64], j: usize) -> bool {
     dt[j] > 0.0 && distance[j].abs() > STOP_SPEED_MPS * dt[j]
 }
 
-/// `a` in `(-pi, pi]`.
-pub(crate) fn wrap(a: f64) -> f64 {
-    let tau = std::f64::consts::TAU;
-    let w = a.rem_euclid(tau);
-    if w > std::f64::consts::PI { w - tau } else { w }
-}
-
 /// The first row at most `seconds` before row `row`.
 fn rows_before(t: &[f64], row: usize, seconds: f64) -> usize {
     t[..=row].partition_point(|&x| x < t[row] - seconds)
@@ -477,7 +470,5 @@ mod tests {
         assert!(matched_rotation(pairs[..2].iter().copied()).is_none());
         let still = [[0.0, 0.0], [0.1, 0.0], [0.2, 0.1]].map(|r| (r, r));
         assert!(matched_rotation(still.into_iter()).is_none());
-        assert!((wrap(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
-        assert!((wrap(-0.5) + 0.5).abs() < 1e-12);
     }
 }

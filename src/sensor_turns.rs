@@ -35,6 +35,7 @@
 //! turn across it from the fixes.
 
 use crate::reversing::RowFix;
+use crate::rotation::wrap_pi;
 
 /// Chords shorter than this (m), on either track, give no direction: GPS
 /// jitter of half a metre turns a 3 m chord by 10-15 deg.
@@ -141,7 +142,7 @@ pub fn find(
                 return f64::NAN;
             }
             let around: Vec<f64> = chords[from..to].iter().map(|c| c.rotation).collect();
-            wrap(chords[k].rotation - circular_median(&around))
+            wrap_pi(chords[k].rotation - circular_median(&around))
         })
         .collect();
     let mut magnitudes: Vec<f64> = departures
@@ -209,13 +210,8 @@ fn circular_median(a: &[f64]) -> f64 {
         .iter()
         .fold((0.0, 0.0), |(s, c), x| (s + x.sin(), c + x.cos()));
     let mean = s.atan2(c);
-    let mut off: Vec<f64> = a.iter().map(|x| wrap(x - mean)).collect();
+    let mut off: Vec<f64> = a.iter().map(|x| wrap_pi(x - mean)).collect();
     mean + crate::statistics::median(&mut off)
-}
-
-/// `a` in `(-pi, pi]`.
-fn wrap(a: f64) -> f64 {
-    crate::reversing::wrap(a)
 }
 
 /// What was found, in a sentence; `None` for nothing.
@@ -389,6 +385,6 @@ mod tests {
     fn the_circular_median_lies_across_the_wrap() {
         let pi = std::f64::consts::PI;
         let m = circular_median(&[pi - 0.1, -pi + 0.1, pi - 0.05, -pi + 0.2, pi - 0.3]);
-        assert!((wrap(m - pi)).abs() < 0.06, "{m}");
+        assert!(wrap_pi(m - pi).abs() < 0.06, "{m}");
     }
 }

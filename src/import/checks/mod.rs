@@ -44,7 +44,7 @@ use axes::{
 use log::{sample_rate, saturation, stuck_gyro};
 use track::{
     AtFix, Stretches, altitude, direction_and_turns, gps_units, local_fixes, odometer_scale,
-    quality, stretches, summarise,
+    quality, stretches, summarise, with_turns_lost,
 };
 
 /// How much a verdict matters.
@@ -202,9 +202,7 @@ impl CheckReport {
 /// up they mean nothing (a pitch axis read as z "turned alone" for 12 s),
 /// and leaving stretches out for them lost a car's vertical.
 fn course_without_sensor_turns(
-    log: &RideLog,
-    blunders: &crate::blunders::Blunders,
-    distance: &[f64],
+    fixes: &[AtFix],
     turns: &[crate::sensor_turns::SensorTurn],
     stretches: &Stretches,
     report: &mut CheckReport,
@@ -212,13 +210,8 @@ fn course_without_sensor_turns(
     if turns.is_empty() {
         return None;
     }
-    let turned: Vec<(usize, usize)> = turns
-        .iter()
-        .map(|s| (s.first_row + 1, s.last_row))
-        .collect();
-    let fixes = summarise(log, blunders, distance, &turned);
     let mut trial = CheckReport::default();
-    let found = course_vertical(&fixes, stretches, &mut trial)?;
+    let found = course_vertical(&with_turns_lost(fixes, turns), stretches, &mut trial)?;
     if found.0.axis != 2 || found.0.sign < 0.0 {
         return None;
     }
@@ -257,20 +250,15 @@ pub fn check(log: &RideLog) -> CheckReport {
     if let Some(w) = blunders.describe(&log.source, &log.line, &log.t_s) {
         report.say("GPS blunders", Level::Warning, w);
     }
-    let turns = direction_and_turns(
-        log,
-        &mut distance,
-        &local_fixes(log, &blunders),
-        &mut report,
-    );
-    let fixes = summarise(log, &blunders, &distance, &[]);
+    let located = local_fixes(log, &blunders);
+    let turns = direction_and_turns(log, &mut distance, &located, &mut report);
+    let fixes = summarise(log, &located, &distance);
     let accel_up = accelerometer_vertical(log, &mut report);
     // One set of stretches (and one measure of the fixes' scatter) for the
     // course and odometer checks.
     let stretches = stretches(&fixes);
-    let course =
-        course_without_sensor_turns(log, &blunders, &distance, &turns, &stretches, &mut report)
-            .or_else(|| course_vertical(&fixes, &stretches, &mut report));
+    let course = course_without_sensor_turns(&fixes, &turns, &stretches, &mut report)
+        .or_else(|| course_vertical(&fixes, &stretches, &mut report));
     // The sensor's own turns, said where z (about which they were found, as
     // the fit finds them) is up by the course.
     if course.is_some_and(|(c, _)| c.axis == 2 && c.sign > 0.0)

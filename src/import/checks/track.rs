@@ -9,6 +9,7 @@ use crate::blunders::Blunders;
 pub(super) const STRETCH_M: f64 = 15.0;
 
 /// Per-fix summaries: everything the checks need, O(fixes) in memory.
+#[derive(Clone)]
 pub(super) struct AtFix {
     pub(super) t: f64,
     pub(super) en: [f64; 2],
@@ -20,38 +21,31 @@ pub(super) struct AtFix {
     /// Mean acceleration since the previous fix, per logged axis.
     pub(super) acc: Option<[f64; 3]>,
     /// Time (s) the log lost its rows before this fix, in gaps longer than
-    /// [`crate::log_gaps::MIN_GAP_S`], or the sensor turned without the
-    /// vehicle: how the vehicle turned across them the gyro does not tell
-    /// (the fit bridges them).
+    /// [`crate::log_gaps::MIN_GAP_S`] (and, see [`with_turns_lost`], where
+    /// the sensor turned without the vehicle): how the vehicle turned across
+    /// them the gyro does not tell (the fit bridges them).
     pub(super) lost_s: f64,
 }
 
-/// The fixes of `log` but its `blunders`, with what happened between them
-/// (`dist`: the odometer's distance per step, zero where it has none;
-/// `turned`: the steps where the sensor turned alone).
+/// The `fixes` of `log` (see [`local_fixes`]), with what happened between
+/// them (`dist`: the odometer's distance per step, zero where it has none).
 pub(super) fn summarise(
     log: &RideLog,
-    blunders: &Blunders,
+    fixes: &[crate::reversing::RowFix],
     dist: &[f64],
-    turned: &[(usize, usize)],
 ) -> Vec<AtFix> {
-    let usable = |j: usize| log.fix[j].filter(|_| !blunders.contains(j));
-    let Some(first) = (0..log.len()).find_map(usable) else {
-        return Vec::new();
-    };
-    let frame = LocalFrame::new(Geodetic::new(first.0, first.1, 0.0));
     let mut s = 0.0;
     let mut turn = [0.0; 3];
     let mut lost_s = 0.0;
     let mut acc_sum = [0.0; 3];
     let mut acc_n = 0usize;
-    let mut out = Vec::new();
+    let mut out = Vec::with_capacity(fixes.len());
+    let mut next = fixes.iter().peekable();
     for j in 0..log.len() {
         if j > 0 {
             let dt = log.t_s[j] - log.t_s[j - 1];
             s += dist[j];
-            if dt > crate::log_gaps::MIN_GAP_S || turned.iter().any(|&(a, b)| (a..=b).contains(&j))
-            {
+            if dt > crate::log_gaps::MIN_GAP_S {
                 lost_s += dt;
             }
             for a in 0..3 {
@@ -64,11 +58,10 @@ pub(super) fn summarise(
             }
             acc_n += 1;
         }
-        if let Some((lat, lon)) = usable(j) {
-            let enu = frame.to_enu(&Geodetic::new(lat, lon, 0.0));
+        if let Some(&(_, en)) = next.next_if(|f| f.0 == j) {
             out.push(AtFix {
                 t: log.t_s[j],
-                en: [enu.x, enu.y],
+                en,
                 alt: log.gps_alt_m.as_ref().and_then(|a| a[j]),
                 s,
                 turn,
@@ -80,6 +73,26 @@ pub(super) fn summarise(
         }
     }
     out
+}
+
+/// `fixes` with the time the sensor turned without the vehicle (`turns`,
+/// from fix to fix) counted as lost too, up to each fix: across it the gyro
+/// does not tell how the vehicle turned, as across a gap in the log.
+pub(super) fn with_turns_lost(
+    fixes: &[AtFix],
+    turns: &[crate::sensor_turns::SensorTurn],
+) -> Vec<AtFix> {
+    fixes
+        .iter()
+        .map(|f| AtFix {
+            lost_s: f.lost_s
+                + turns
+                    .iter()
+                    .map(|s| (f.t.min(s.to_s) - s.from_s).max(0.0))
+                    .sum::<f64>(),
+            ..f.clone()
+        })
+        .collect()
 }
 
 /// Stretches of the track (see [`stretches`]).
