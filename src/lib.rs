@@ -48,6 +48,7 @@ pub mod signals;
 pub mod simulation;
 pub mod standing;
 pub mod statistics;
+pub mod suspect_fixes;
 
 #[cfg(test)]
 pub(crate) mod testing;

@@ -478,6 +478,18 @@ impl Model {
         Ok(m)
     }
 
+    /// This model without the fixes its start guess suspects of a
+    /// reflection (see [`crate::suspect_fixes`]), for step 1's windows; their
+    /// barometer rows stay.
+    pub fn without_suspect_fixes(mut self) -> Self {
+        let suspect = &self.start.suspect_fixes;
+        if !suspect.is_empty() {
+            self.observations
+                .retain(|o| o.baro || suspect.binary_search_by(|t| t.total_cmp(&o.t)).is_err());
+        }
+        self
+    }
+
     /// `free` less the parameters that act only outside this model's fixes:
     /// past the rows it sweeps (a restricted model's later segment biases,
     /// which nothing observes and a chain solve would carry as open columns)

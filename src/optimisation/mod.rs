@@ -567,6 +567,7 @@ impl Reconstruction {
                     model: prev
                         .model
                         .window(&self.theta, row - 1, t_end)?
+                        .without_suspect_fixes()
                         .least_squares(true),
                     from: Some(start),
                 }));
@@ -578,7 +579,9 @@ impl Reconstruction {
     /// Step 1's window over the ride's first `length` seconds, from row 0.
     fn cut_window(&self, length: f64, least_squares: bool) -> Result<Window, FitError> {
         let source = self.windows_model();
-        let model = source.restricted(source.signals.t[0] + length)?;
+        let model = source
+            .restricted(source.signals.t[0] + length)?
+            .without_suspect_fixes();
         Ok(Window {
             length,
             model: model.least_squares(least_squares),
