@@ -49,6 +49,9 @@ pub const MIN_OFF_M: f64 = 10.0;
 /// Over this share of the fixes suspect, the track is not trusted and
 /// none is.
 pub const MAX_SHARE: f64 = 0.25;
+/// A rigid fit takes at most this many of its window's fixes, evenly:
+/// a 10 Hz receiver's four minutes are 2,400.
+const MAX_WINDOW_FIXES: usize = 600;
 /// Tukey's biweight constant (95 % efficiency under Gaussian errors).
 const TUKEY_C: f64 = 4.685;
 /// Reweighting rounds of a rigid fit.
@@ -73,12 +76,15 @@ pub fn find(t: &[f64], along: &[f64], track: &[[f64; 2]], fixes: &[[f64; 2]]) ->
         while hi < n && t[hi] - t[end - 1] <= WINDOW_S {
             hi += 1;
         }
-        let window: Vec<usize> = (lo..hi)
+        let within: Vec<usize> = (lo..hi)
             .filter(|&j| {
                 along[j] >= along[start].min(along[end - 1]) - WINDOW_M
                     && along[j] <= along[start].max(along[end - 1]) + WINDOW_M
             })
             .collect();
+        // Every k-th where a fast receiver gives more than enough.
+        let stride = within.len().div_ceil(MAX_WINDOW_FIXES).max(1);
+        let window: Vec<usize> = within.into_iter().step_by(stride).collect();
         if let Some((r, shift)) = rigid_fit(&window, track, fixes) {
             for k in start..end {
                 let p = rotate(r, track[k]);
