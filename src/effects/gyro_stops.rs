@@ -197,6 +197,34 @@ impl GyroStops {
     fn z(&self, k: usize) -> usize {
         2 * self.lengths.len() + k
     }
+
+    /// Piece `k`'s turn about z at the fit's start, before the bias (rad):
+    /// its share of the stop's turn from the fixes, else none through the
+    /// rates as read, and on a gap in the log the rates as they are (see
+    /// [`Effect::initial`]).
+    fn start_turn(&self, k: usize) -> f64 {
+        let g = self.piece_stop[k];
+        if self.filled[g] {
+            0.0
+        } else {
+            let share = self.piece_lengths[k] / self.lengths[g];
+            self.from_fixes[g].map_or(-self.turned[k], |c| c * share)
+        }
+    }
+
+    /// The yaw rate each row's step gains at the fit's start (rad/s, zero
+    /// outside the stops): `c_k,z w_j / T_k` with `c_k,z` from
+    /// [`Self::start_turn`], the bias aside. The start guess dead-reckons
+    /// with it, so that its track turns across the stops as the fit's
+    /// first does: with the held rates' line alone, a helmet camera's
+    /// looks, bridged as stops while the car turned 60 deg, kinked the
+    /// guess's track there and its course samples' line.
+    pub(crate) fn start_yaw_rates(&self) -> Vec<f64> {
+        self.step
+            .iter()
+            .map(|s| s.map_or(0.0, |s| self.start_turn(s.piece) * s.w_piece))
+            .collect()
+    }
 }
 
 impl Effect for GyroStops {
@@ -266,15 +294,7 @@ impl Effect for GyroStops {
     fn initial(&self, guess: &StartGuess) -> Vec<f64> {
         let mut out = vec![0.0; 2 * self.lengths.len()];
         for (k, &length) in self.piece_lengths.iter().enumerate() {
-            let g = self.piece_stop[k];
-            let bias = guess.gyro_bias.z * length;
-            let share = length / self.lengths[g];
-            let turn = if self.filled[g] {
-                0.0
-            } else {
-                self.from_fixes[g].map_or(-self.turned[k], |c| c * share)
-            };
-            out.push(bias + turn);
+            out.push(guess.gyro_bias.z * length + self.start_turn(k));
         }
         out
     }
@@ -483,5 +503,26 @@ mod tests {
         assert!((rows.residuals[4] - (p[4] + e.turned[0]) / sigma).abs() < 1e-12);
         assert!((rows.residuals[0] - p[0] / (LEVEL_SIGMA_DEG / DEG_PER_RAD)).abs() < 1e-12);
         assert!(GyroStops::new(&winding_signals(12.0, 100.0)).is_err());
+    }
+
+    /// The start guess's rates across the stops are the fit's first, row by
+    /// row: `c_k w_j / T_k` with the effect's initial turns (bias aside).
+    #[test]
+    fn the_start_guess_turns_in_the_stops_as_the_fit_starts() {
+        let mut sig = winding_signals(12.0, 100.0);
+        sig.gyro_stops = vec![(3.0, 8.0), (9.005, 9.5)];
+        for sig in [sig.clone(), sig.coarse(0.05).unwrap()] {
+            let e = GyroStops::new(&sig).unwrap();
+            let mut guess = StartGuess::from_signals(&sig).unwrap();
+            guess.gyro_bias = Vector3::zeros();
+            let start = e.initial(&guess);
+            let rates = e.start_yaw_rates();
+            assert_eq!(rates.len(), sig.len());
+            assert!(rates.iter().any(|r| r.abs() > 1e-6));
+            for (j, r) in rates.iter().enumerate().skip(1) {
+                let fit = e.gyro(&start, j, Vector3::zeros()).z;
+                assert!((fit - r).abs() < 1e-12, "row {j}: {fit} against {r}");
+            }
+        }
     }
 }

@@ -171,8 +171,18 @@ pub(crate) struct Anchor {
 
 impl Model {
     /// Build the model of `spec` on `signals`, with the start guess made from them.
+    ///
+    /// The guess dead-reckons across the gyro's stops with the turns that
+    /// `gyro_stops` starts from where the model has it (see
+    /// [`StartGuess::turning_in_stops`]).
     pub fn new(signals: Arc<Signals>, spec: ModelSpec) -> Result<Self, ModelError> {
-        let start = StartGuess::from_signals(&signals)?;
+        let ids = effects::expand(&spec.effects, &signals)?;
+        let stops = if ids.iter().any(|id| id == "gyro_stops") {
+            effects::GyroStops::new(&signals)?.start_yaw_rates()
+        } else {
+            Vec::new()
+        };
+        let start = StartGuess::turning_in_stops(&signals, &stops)?;
         Self::with_start(signals, spec, start)
     }
 
