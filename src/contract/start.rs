@@ -96,7 +96,7 @@ impl StartGuess {
         let mut unwrapped = 0.0;
         let mut last = 0.0;
         for j in 1..n {
-            q *= UnitQuaternion::from_scaled_axis((rate(sig, &stops, j) - rate_bias) * sig.dt[j]);
+            q *= UnitQuaternion::from_scaled_axis((rate(sig, stops, j) - rate_bias) * sig.dt[j]);
             let f = q * Vector3::x();
             let h = f.y.atan2(f.x);
             unwrapped += wrap_pi(h - last);
@@ -157,7 +157,7 @@ impl StartGuess {
             .map(|slope0| heading_line(&samples, slope0))
             .map(|(heading, slope)| {
                 let bias = rate_bias + Vector3::new(0.0, 0.0, -slope);
-                let misfit = shape_misfit(sig, &stops, &odo_at, heading, bias, odometer_gain);
+                let misfit = shape_misfit(sig, stops, &odo_at, heading, bias, odometer_gain);
                 (heading, slope, misfit)
             })
             .collect();
@@ -174,7 +174,7 @@ impl StartGuess {
 
         Ok(Self::finish_guess(
             sig,
-            &stops,
+            stops,
             &odo_at,
             attitude,
             gyro_bias,
