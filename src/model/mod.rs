@@ -175,15 +175,23 @@ impl Model {
     /// The guess dead-reckons across the gyro's stops with the turns that
     /// `gyro_stops` starts from where the model has it (see
     /// [`StartGuess::turning_in_stops`]).
+    ///
+    /// That effect is built once, for the guess and the model both: its
+    /// turn search reads the fixes around every stop.
     pub fn new(signals: Arc<Signals>, spec: ModelSpec) -> Result<Self, ModelError> {
+        Self::checked(&spec)?;
         let ids = effects::expand(&spec.effects, &signals)?;
-        let stops = if ids.iter().any(|id| id == "gyro_stops") {
-            effects::GyroStops::new(&signals)?.start_yaw_rates()
-        } else {
-            Vec::new()
-        };
-        let start = StartGuess::turning_in_stops(&signals, &stops)?;
-        Self::with_start(signals, spec, start)
+        let stops = ids
+            .iter()
+            .any(|id| id == "gyro_stops")
+            .then(|| effects::GyroStops::new(&signals))
+            .transpose()?;
+        let rates = stops
+            .as_ref()
+            .map_or_else(Vec::new, effects::GyroStops::start_yaw_rates);
+        let start = StartGuess::turning_in_stops(&signals, &rates)?;
+        let effects = Self::built(&ids, &signals, &spec, &start, stops)?;
+        Self::assemble(signals, spec, start, effects)
     }
 
     /// Build with a given start guess (used when re-shaping a running fit).
@@ -194,11 +202,24 @@ impl Model {
     ) -> Result<Self, ModelError> {
         Self::checked(&spec)?;
         let ids = effects::expand(&spec.effects, &signals)?;
-        let effects: Vec<Box<dyn Effect>> = ids
-            .iter()
-            .map(|id| effects::build(id, &signals, &spec, &start))
-            .collect::<Result<_, _>>()?;
+        let effects = Self::built(&ids, &signals, &spec, &start, None)?;
         Self::assemble(signals, spec, start, effects)
+    }
+
+    /// The effects `ids`, `gyro_stops` taken from `stops` where already built.
+    fn built(
+        ids: &[String],
+        signals: &Signals,
+        spec: &ModelSpec,
+        start: &StartGuess,
+        mut stops: Option<effects::GyroStops>,
+    ) -> Result<Vec<Box<dyn Effect>>, ModelError> {
+        ids.iter()
+            .map(|id| match stops.take_if(|_| id == "gyro_stops") {
+                Some(built) => Ok(Box::new(built) as Box<dyn Effect>),
+                None => effects::build(id, signals, spec, start),
+            })
+            .collect()
     }
 
     /// `spec`'s noise settings, or why they cannot be.
