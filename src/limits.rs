@@ -12,6 +12,7 @@
 //! | --- | --- | --- |
 //! | odometer gain | 0.7 .. 1.3 | a wrong circumference or a CAN scale is off by a few percent; beyond 30 % the units are wrong (km/h as m/s is 3.6, feet as metres 3.28, knots 1.94; see `distance_units`), negative the sign or the forward axis |
 //! | start tilt of the sensor | 30 deg | a sensor is mounted near upright (the fit's own prior is 10 deg); more means the vertical axis is not z, or the roll and pitch rates do not describe the vehicle |
+//! | tilt of the sensor along the ride | 90 deg | a vehicle never rides on its side or upside down (a motorcycle's lean and a tilted mount together stay under it); more means the fit turned the sensor over, most often across a gyro stop's free roll and pitch turns, to explain wrong axes |
 //! | mounting misalignment | 20 deg | a bracket is a few degrees off; 90 or 180 is a swapped or flipped axis |
 //! | gyro scale error | 20 % | MEMS scale errors are a few percent; 57x or 1/57 is rad/s against deg/s |
 //! | barometer drift (diagnosis only) | 50 m/h | the weather moves the pressure by at most a few hPa an hour (a strong front 3 hPa, 25 m); hundreds of m/h is a vertical misfit of something else (on 30 s simulated rides whose barometers drift 1-4 m/h, `baro_drift` read 184-528 m/h) |
@@ -25,6 +26,7 @@ use crate::model::{Model, PathAt};
 /// Limits (see the module documentation).
 pub const GAIN_RANGE: (f64, f64) = (0.7, 1.3);
 pub const MAX_START_TILT_DEG: f64 = 30.0;
+pub const MAX_TILT_DEG: f64 = 90.0;
 pub const MAX_MOUNT_DEG: f64 = 20.0;
 pub const MAX_SCALE_PERCENT: f64 = 20.0;
 pub const MAX_BARO_DRIFT_M_PER_H: f64 = 50.0;
@@ -62,7 +64,34 @@ pub fn check(model: &Model, theta: &[f64]) -> Vec<Violation> {
 pub fn check_on(model: &Model, theta: &[f64], path: &impl PathAt) -> Vec<Violation> {
     let mut out = parameters(model, theta);
     out.extend(path_far_from_fixes(model, path));
+    out.extend(turned_over(model, path));
     out
+}
+
+/// The sensor's tilt (its z from the vertical) at the fixes' rows, where
+/// over [`MAX_TILT_DEG`]: the fit turned the sensor over somewhere after
+/// its start, whose own tilt [`parameters`] checks. A gyro stop's roll and
+/// pitch turns are free (see `effects::gyro_stops`), and a car logged
+/// upside down whose sensor turns were bridged as stops was fitted rolling
+/// 170 and 251 deg across two of them, 12 m from fixes 1.5 m off, with a
+/// GPS noise of 10 m learnt from its own misfit. `path` must hold every
+/// fix's row.
+pub fn turned_over(model: &Model, path: &impl PathAt) -> Option<Violation> {
+    let (tilt, t) = model
+        .signals
+        .fixes
+        .iter()
+        .map(|f| {
+            let up = path.q_at(f.row) * nalgebra::Vector3::z();
+            (up.z.clamp(-1.0, 1.0).acos() * DEG_PER_RAD, f.t)
+        })
+        .max_by(|a, b| a.0.total_cmp(&b.0))?;
+    (tilt > MAX_TILT_DEG).then(|| Violation {
+        quantity: "tilt of the sensor along the ride".into(),
+        value: format!("{tilt:.0} deg at t = {t:.1} s"),
+        limit: format!("{MAX_TILT_DEG:.0} deg"),
+        cause: "a vehicle does not ride on its side or upside down: the fit turned the sensor over to explain turns it could not, most often wrong axes (see `gyropath check`; --mount auto)".into(),
+    })
 }
 
 /// A path whose distance from the fixes, at the upper quartile of the fixes
@@ -265,6 +294,29 @@ mod tests {
         assert!(v[1].cause.contains("upside down"), "{}", v[1]);
         theta[gain] = 3.55;
         assert!(parameters(&model, &theta)[0].cause.contains("km/h"));
+    }
+
+    #[test]
+    fn a_sensor_turned_over_across_a_gyro_stop_is_no_result() {
+        let mut sig = crate::testing::simulated_signals(5, 60.0, &[]);
+        sig.gyro_stops = vec![(12.0, 17.5)];
+        let model = Model::new(Arc::new(sig), ModelSpec::default()).unwrap();
+        let stops = model.range(model.effect_index("gyro_stops").unwrap());
+        let mut theta = model.initial_params();
+        let over = |theta: &[f64]| turned_over(&model, &model.trajectory(theta));
+        assert!(over(&theta).is_none());
+        // A bicycle may come out of a stop leaning the other way ...
+        theta[stops.start] = 40f64.to_radians();
+        assert!(over(&theta).is_none());
+        assert!(check(&model, &theta).is_empty());
+        // ... but not on its back.
+        theta[stops.start] = 170f64.to_radians();
+        let v = over(&theta).expect("turned over");
+        let tilt: f64 = v.value.split(' ').next().unwrap().parse().unwrap();
+        assert!((150.0..=180.0).contains(&tilt), "{v}");
+        assert!(v.cause.contains("--mount auto"), "{v}");
+        assert!(parameters(&model, &theta).is_empty());
+        assert!(check(&model, &theta).contains(&v));
     }
 
     #[test]
