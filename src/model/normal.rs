@@ -90,7 +90,7 @@ pub(crate) struct ChainDerivatives {
     /// Rows of the global parameters (observations x globals).
     pub jg: DMatrix<f64>,
     /// Block an observation lies in (`u32::MAX`: none) and its entries there.
-    pub jb: Vec<(u32, [f64; 3])>,
+    pub jb: Vec<(u32, BlockEntries)>,
     /// Rows swept by the model.
     pub horizon: usize,
 }
@@ -117,15 +117,45 @@ struct Gathered {
     first: Option<usize>,
     at: Vec<Vector3<f64>>,
     jg: Vec<f64>,
-    jb: Vec<(u32, [f64; 3])>,
+    jb: Vec<(u32, BlockEntries)>,
 }
 
-/// A group of local columns acting on the same stretch of steps.
+/// An observation's derivatives in the parameters of its block, in the
+/// block's order: inline for a segment's three biases, on the heap only
+/// for a block that holds a gyro stop's turns too.
+pub(crate) type BlockEntries = smallvec::SmallVec<[f64; 3]>;
+
+/// A group of local columns acting within one stretch of steps, from
+/// `first` to `last`; each of its parameters on all of it or on a part
+/// (a stop's turns inside a segment).
 #[derive(Clone, Debug)]
 pub(crate) struct Block {
     pub first: usize,
     pub last: usize,
     pub params: Vec<usize>,
+}
+
+/// `groups` (local parameters by the stretch they act on) sorted by their
+/// first step, those whose stretches overlap merged into one block: the
+/// chain's blocks follow one another. A segment's bias and the turns of a
+/// gyro stop inside it (or across its end) act on overlapping stretches;
+/// in one block their columns are open together, each parameter's
+/// derivative its own (its prefix sums are zero before it acts, final
+/// after). Stretches past the ride's end (`first` = `usize::MAX`) stay
+/// apart.
+fn merged(mut groups: Vec<Block>) -> Vec<Block> {
+    groups.sort_by_key(|b| b.first);
+    let mut out: Vec<Block> = Vec::with_capacity(groups.len());
+    for g in groups {
+        match out.last_mut() {
+            Some(b) if g.first != usize::MAX && g.first <= b.last => {
+                b.last = b.last.max(g.last);
+                b.params.extend(g.params);
+            }
+            _ => out.push(g),
+        }
+    }
+    out
 }
 
 impl Model {
@@ -197,15 +227,7 @@ impl Model {
         if blocks.is_empty() {
             return None;
         }
-        blocks.sort_by_key(|b| b.first);
-        for w in blocks.windows(2) {
-            if w[1].first != usize::MAX && w[1].first <= w[0].last {
-                return None;
-            }
-        }
-        if blocks.iter().any(|b| b.params.len() > 3) {
-            return None;
-        }
+        let blocks = merged(blocks);
         let mut block_at = vec![u32::MAX; self.horizon()];
         for (b, block) in blocks.iter().enumerate() {
             if block.first < self.horizon() {
@@ -248,12 +270,14 @@ impl Model {
                         }
                     });
                     let b = block_at[row];
-                    let mut vals = [0.0; 3];
-                    if b != u32::MAX {
-                        for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
-                            vals[kk] = sums.dp_at(i, &p, beta)[a];
-                        }
-                    }
+                    let vals: BlockEntries = match blocks.get(b as usize) {
+                        Some(block) => block
+                            .params
+                            .iter()
+                            .map(|&i| sums.dp_at(i, &p, beta)[a])
+                            .collect(),
+                        None => BlockEntries::new(),
+                    };
                     out.jb.push((b, vals));
                     k += 1;
                 }
@@ -263,7 +287,7 @@ impl Model {
         let mut at = vec![Vector3::zeros(); no];
         let mut xs = vec![0.0; no];
         let mut jg = DMatrix::<f64>::zeros(no, ng);
-        let mut jb: Vec<(u32, [f64; 3])> = vec![(u32::MAX, [0.0; 3]); no];
+        let mut jb: Vec<(u32, BlockEntries)> = vec![(u32::MAX, BlockEntries::new()); no];
         let mut r = DVector::<f64>::zeros(no);
         let mut slope = vec![(1.0, 0.0); no];
         let mut white = Whitener::new(&plan, obs);
@@ -304,7 +328,7 @@ impl Model {
                 for (g, &i) in globals.iter().enumerate() {
                     jg[(k, g)] = gathered.jg[n * ng + g] + earlier(i);
                 }
-                let (b, mut vals) = gathered.jb[n];
+                let (b, mut vals) = gathered.jb[n].clone();
                 if b != u32::MAX {
                     for (kk, &i) in blocks[b as usize].params.iter().enumerate() {
                         vals[kk] += earlier(i);
@@ -441,7 +465,7 @@ impl Model {
                 at: take.iter().map(|&o| lin.at[o]).collect(),
                 rows: take.iter().map(|&o| lin.rows[o]).collect(),
                 jg: lin.jg.select_rows(take.iter()),
-                jb: take.iter().map(|&o| lin.jb[o]).collect(),
+                jb: take.iter().map(|&o| lin.jb[o].clone()).collect(),
                 horizon: lin.horizon,
             }),
             x: take.iter().map(|&o| lin.x[o]).collect(),
@@ -645,7 +669,7 @@ impl ChainLinearisation {
             .map(|b| vec![V9::zeros(); b.params.len()])
             .collect();
         for o in 0..no {
-            let (b, vals) = jb[o];
+            let (b, vals) = (jb[o].0, &jb[o].1);
             if b == u32::MAX {
                 continue;
             }

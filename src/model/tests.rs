@@ -226,12 +226,19 @@ fn moment_normal_equations_equal_the_dense_ones() {
         model(Increment::Exact, None),
         model(Increment::Exact, Some(0.01)),
         catalogue_model(),
+        gyro_stops_model(),
     ] {
         let p = perturbed(&m);
         for roles in [
             vec![effects::Role::Global, effects::Role::Segments],
             vec![effects::Role::Segments],
             vec![effects::Role::Global, effects::Role::Step1Only],
+            // The stops' turns share blocks with the segments they lie in.
+            vec![
+                effects::Role::Global,
+                effects::Role::Segments,
+                effects::Role::Step2Only,
+            ],
         ] {
             let free = m.free_mask(&roles);
             let lin = m.linearise(&p, &free);
@@ -293,6 +300,29 @@ fn chain_solver_gives_the_dense_lm_step() {
             let free = m.free_mask(&roles);
             cases.push((m.restricted(f64::INFINITY).unwrap(), free));
         }
+    }
+    // A gyro stop's turns in the blocks of the segments they overlap (the
+    // first stop straddles two segments and merges them), the segments and
+    // globals free as in step 2, or the stops' turns alone.
+    let stops = gyro_stops_model();
+    let in_blocks = stops
+        .chain_linearisation(
+            &perturbed(&stops),
+            &stops.free_mask(&[effects::Role::Segments, effects::Role::Step2Only]),
+        )
+        .expect("a chain");
+    assert!(in_blocks.globals.is_empty());
+    assert!(in_blocks.blocks.iter().any(|b| b.params.len() > 6));
+    for roles in [
+        vec![
+            effects::Role::Global,
+            effects::Role::Segments,
+            effects::Role::Step2Only,
+        ],
+        vec![effects::Role::Segments, effects::Role::Step2Only],
+    ] {
+        let free = stops.free_mask(&roles);
+        cases.push((stops.restricted(f64::INFINITY).unwrap(), free));
     }
     for (m, free) in &cases {
         let p = perturbed(m);

@@ -777,11 +777,11 @@ impl ChainSystem {
                 }
                 r[s0 + 3 + a] = 1.0;
             }
-            let (b, vals) = lin.jb[o];
-            if b != u32::MAX
-                && let Some(c0) = work.col_of(b as usize)
+            let (b, vals) = &lin.jb[o];
+            if *b != u32::MAX
+                && let Some(c0) = work.col_of(*b as usize)
             {
-                for (x, &i) in blocks[b as usize].params.iter().enumerate() {
+                for (x, &i) in blocks[*b as usize].params.iter().enumerate() {
                     r[c0 + x] = vals[x] / scale[self.pos[i]];
                 }
             }

@@ -152,29 +152,27 @@ impl ChainSystem {
         for (b, block) in lin.blocks.iter().enumerate() {
             let lo = lin.rows.partition_point(|&r| r < block.first);
             let hi = lin.rows.partition_point(|&r| r <= block.last);
-            // dz of the block's parameters at its own observations.
-            let mut z = vec![[0.0; 3]; hi - lo];
+            // dz of the block's parameters at its own observations, `w` a row.
+            let w = block.params.len();
+            let mut z = vec![0.0; (hi - lo) * w];
             for o in lo..hi {
                 let (m, n) = lin.slope[o];
                 let l = links[o];
-                let zp = match l.prev {
-                    Some(j) if j >= lo => z[j - lo],
-                    _ => [0.0; 3],
-                };
-                let dx = if lin.jb[o].0 == b as u32 {
-                    lin.jb[o].1
-                } else {
-                    [0.0; 3]
-                };
+                let own = lin.jb[o].0 == b as u32;
                 for (x, &i) in block.params.iter().enumerate() {
-                    diag[pos[i]] += (m * dx[x] + n * zp[x]).powi(2);
-                    z[o - lo][x] = l.alpha * zp[x] + l.kappa * dx[x];
+                    let zp = match l.prev {
+                        Some(j) if j >= lo => z[(j - lo) * w + x],
+                        _ => 0.0,
+                    };
+                    let dx = if own { lin.jb[o].1[x] } else { 0.0 };
+                    diag[pos[i]] += (m * dx + n * zp).powi(2);
+                    z[(o - lo) * w + x] = l.alpha * zp + l.kappa * dx;
                 }
             }
             for &j in &straddling[b] {
                 for (x, &i) in block.params.iter().enumerate() {
                     let y = &lin.y[b][x];
-                    let zj = if j >= lo { z[j - lo][x] } else { 0.0 };
+                    let zj = if j >= lo { z[(j - lo) * w + x] } else { 0.0 };
                     let d = zj - hz[j].dot(y);
                     diag[pos[i]] += 2.0 * d * q[j].dot(y) + d * d * r2[j];
                 }
@@ -349,9 +347,9 @@ impl ChainSystem {
                 next += 1;
             }
             let mut jd = lin.h[o].dot(&s);
-            let (b, vals) = lin.jb[o];
-            if b != u32::MAX {
-                for (x, &i) in lin.blocks[b as usize].params.iter().enumerate() {
+            let (b, vals) = &lin.jb[o];
+            if *b != u32::MAX {
+                for (x, &i) in lin.blocks[*b as usize].params.iter().enumerate() {
                     jd += vals[x] * delta[self.pos[i]];
                 }
             }
