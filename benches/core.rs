@@ -79,6 +79,24 @@ fn bench(c: &mut Criterion) {
             });
         }
     }
+    // A gyro that stopped twenty times for 5 s: each stop's turns (98 in
+    // all) are local columns of the chain, in the blocks of the segments
+    // they overlap; as global columns they widened every row (52 s to fit
+    // this ride in full, 3.8 s since).
+    let (_, sig) = ride(30.0);
+    let mut stopped = (*sig).clone();
+    stopped.gyro_stops = (0..20)
+        .map(|k| (60.0 + 85.0 * k as f64, 65.0 + 85.0 * k as f64))
+        .collect();
+    let model = Model::new(Arc::new(stopped), ModelSpec::default()).unwrap();
+    let theta = model.initial_params();
+    let free = vec![true; model.n_params()];
+    g.bench_function("lm_step/30min_20_stops", |b| {
+        b.iter(|| {
+            let chain = model.chain_system(black_box(&theta), &free).unwrap();
+            chain.solve(1e-3).unwrap()
+        })
+    });
     // `gyropath diagnose` without its printing (issue 13's target: 4 s on 20 minutes).
     let (_, sig) = ride(20.0);
     g.bench_function("diagnose/20min", |b| {
