@@ -161,8 +161,8 @@ fn merged(mut groups: Vec<Block>) -> Vec<Block> {
 impl Model {
     /// Normal equations at `theta` over the parameters where `free` is true.
     ///
-    /// Falls back to `J^T J` of the dense Jacobian when local parameters
-    /// overlap in a way the moment form does not cover.
+    /// Falls back to `J^T J` of the dense Jacobian for a model without
+    /// local parameters and for whitened (coupled) rows.
     pub fn normal_equations(&self, theta: &[f64], free: &[bool]) -> NormalEquations {
         self.structured_normal_equations(theta, free)
             .unwrap_or_else(|| {
@@ -179,7 +179,7 @@ impl Model {
     }
 
     /// The linearisation in chain form (see [`ChainLinearisation`]), or `None`
-    /// when local parameters overlap in a way the chain form does not cover.
+    /// for a model without local parameters (no segments free).
     pub(crate) fn chain_linearisation(
         &self,
         theta: &[f64],
