@@ -68,6 +68,11 @@ pub fn check_on(model: &Model, theta: &[f64], path: &impl PathAt) -> Vec<Violati
     out
 }
 
+/// The angle (deg) between the sensor's z in attitude `q` and the vertical.
+fn tilt_deg(q: &nalgebra::UnitQuaternion<f64>) -> f64 {
+    (q * nalgebra::Vector3::z()).z.clamp(-1.0, 1.0).acos() * DEG_PER_RAD
+}
+
 /// The sensor's tilt (its z from the vertical) at the fixes' rows, where
 /// over [`MAX_TILT_DEG`]: the fit turned the sensor over somewhere after
 /// its start, whose own tilt [`parameters`] checks. A gyro stop's roll and
@@ -81,10 +86,7 @@ pub fn turned_over(model: &Model, path: &impl PathAt) -> Option<Violation> {
         .signals
         .fixes
         .iter()
-        .map(|f| {
-            let up = path.q_at(f.row) * nalgebra::Vector3::z();
-            (up.z.clamp(-1.0, 1.0).acos() * DEG_PER_RAD, f.t)
-        })
+        .map(|f| (tilt_deg(&path.q_at(f.row)), f.t))
         .max_by(|a, b| a.0.total_cmp(&b.0))?;
     (tilt > MAX_TILT_DEG).then(|| Violation {
         quantity: "tilt of the sensor along the ride".into(),
@@ -219,8 +221,7 @@ pub fn parameters(model: &Model, theta: &[f64]) -> Vec<Violation> {
         }
     }
     let (q0, _, _) = model.initial_state(theta);
-    let up = q0 * nalgebra::Vector3::z();
-    let tilt = up.z.clamp(-1.0, 1.0).acos() * DEG_PER_RAD;
+    let tilt = tilt_deg(&q0);
     if tilt > MAX_START_TILT_DEG {
         let cause = if tilt > 90.0 {
             "the sensor is upside down: the sign of its vertical axis is flipped (see `gyropath check`; --mount auto)".to_string()
