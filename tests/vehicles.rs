@@ -222,9 +222,11 @@ fn a_cars_pitch_gyro_is_not_taken_for_its_vertical() {
 /// Rides logged z up in deg/s are not told otherwise where the course
 /// tells little: a car in open sky that turns one way across two GPS
 /// outages (seed 62, 240 s; the course's steady turn read as every axis's,
-/// it was "-z up, 23 times less than the course": --mount auto then failed
-/// the fit), and a bicycle in the city, whose dozen stretches read deg/s as
-/// 1.30 ("check the units"). The checks may say they cannot tell; they may
+/// it was "-z up", its gyro turning "23 times more than the course": --mount
+/// auto then failed the fit), a bicycle in the city whose lean gave its y
+/// axis a share of the turn that 10 stretches read as its vertical (seed
+/// 62, 240 s), and one whose dozen stretches read deg/s as 1.30 ("check
+/// the units"). The checks may say they cannot tell; they may
 /// not name a problem, nor a mounting other than the log's own.
 #[test]
 fn a_log_in_deg_per_second_with_z_up_is_not_told_otherwise_on_little_evidence() {
@@ -244,6 +246,13 @@ fn a_log_in_deg_per_second_with_z_up_is_not_told_otherwise_on_little_evidence() 
             Vehicle::Car,
             GpsEnvironment::Open,
             vec!["mount_misalignment".to_string()],
+        ),
+        (
+            62,
+            240.0,
+            Vehicle::Bicycle,
+            GpsEnvironment::City,
+            vec!["gyro_scale".to_string()],
         ),
         (1, 300.0, Vehicle::Bicycle, GpsEnvironment::City, vec![]),
         (3, 300.0, Vehicle::Bicycle, GpsEnvironment::City, vec![]),
