@@ -289,6 +289,63 @@ fn a_log_in_deg_per_second_with_z_up_is_not_told_otherwise_on_little_evidence() 
     }
 }
 
+/// A robot crawling at 0.6 m/s under urban fixes (seed 8, 300 s): the
+/// fixes' reflections lengthened the chords that end on them, and the
+/// odometer check, summing the chords, read 0.523 m per GPS metre and named
+/// the speed knots (PROBLEM), and the same ride with its speed written in
+/// knots as right. The stretches' median reads the first as right and
+/// warns on the second (1.80 m per GPS metre).
+#[test]
+fn a_robot_under_urban_fixes_is_not_told_its_speed_is_in_knots() {
+    use gyropath::import::Level;
+    use gyropath::simulation::GpsEnvironment;
+    let sim = simulate(&SimConfig {
+        seed: 8,
+        duration_s: 300.0,
+        vehicle: Vehicle::Robot,
+        gps: GpsEnvironment::Urban,
+        ..SimConfig::default()
+    })
+    .expect("simulate");
+    let odometer = |csv: &str| {
+        let log = import::parse(csv.as_bytes(), "robot.csv").expect("parse");
+        let im = import::checked(log, SourceKind::RideCsv, None, &MountChoice::AsLogged);
+        im.check
+            .verdicts
+            .iter()
+            .find(|v| v.subject == "odometer")
+            .cloned()
+            .expect("an odometer verdict")
+    };
+    let right = odometer(&sim.log_csv);
+    assert_eq!(right.level, Level::Ok, "{right:?}");
+    // The speed in knots: every speed_mps value times 1.94384.
+    let mut column = None;
+    let knots: String = sim
+        .log_csv
+        .lines()
+        .map(|line| {
+            if line.starts_with('#') {
+                return format!("{line}\n");
+            }
+            let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+            match column {
+                None => column = cells.iter().position(|c| c == "speed_mps"),
+                Some(k) => {
+                    if let Ok(v) = cells[k].parse::<f64>() {
+                        cells[k] = format!("{}", v * 1.94384);
+                    }
+                }
+            }
+            format!("{}\n", cells.join(","))
+        })
+        .collect();
+    assert!(column.is_some(), "the robot logs speed_mps");
+    // The sums read it as right (0.523 x 1.944 = 1.02); the median warns.
+    let wrong = odometer(&knots);
+    assert!(wrong.level >= Level::Warning, "{wrong:?}");
+}
+
 /// A car's logger drops its rows for 20 s in a 74 deg bend (seed 4, 100-120
 /// s). Across one step the model turned first and then moved the whole
 /// distance along the new heading, and the fit bent its bias to meet the
