@@ -84,8 +84,10 @@ fn the_segment_reads_with_its_channels_rates_and_clock() {
         .find(|v| v.subject == "odometer")
         .expect("odometer verdict");
     assert_eq!(odometer.level, gyropath::import::Level::Ok, "{odometer:?}");
+    // The median of 53 stretches' ratios (the ratio of their sums read
+    // 0.992); the fit's own gain, 1.009, says 0.991.
     assert!(
-        odometer.message.contains("0.992 m per metre"),
+        odometer.message.contains("0.989 m per metre"),
         "{odometer:?}"
     );
 }
