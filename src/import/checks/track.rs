@@ -249,7 +249,8 @@ pub(super) const STRETCH_PER_SCATTER: f64 = 10.0;
 const MEDIAN_STRETCHES: usize = 3;
 
 /// The median over the stretches `idx` of each one's odometer distance per
-/// metre of its chord; `None` with fewer than [`MEDIAN_STRETCHES`] chords.
+/// metre of its chord, and how many chords it took; `None` with fewer than
+/// [`MEDIAN_STRETCHES`].
 ///
 /// A wrong unit scales every stretch alike; a reflected or wandering fix
 /// lengthens the one or two chords that end on it, by up to its error. The
@@ -261,7 +262,7 @@ const MEDIAN_STRETCHES: usize = 3;
 /// 180 with the speed written in km/h, m/s as km/h or knots (the car and
 /// robot rides of the sweeps) the sums named the unit on 120 and passed
 /// 5 as right, the median 131 and 1.
-fn median_ratio(fixes: &[AtFix], idx: &[usize]) -> Option<f64> {
+fn median_ratio(fixes: &[AtFix], idx: &[usize]) -> Option<(f64, usize)> {
     let each: Vec<f64> = idx
         .windows(2)
         .filter_map(|w| {
@@ -270,7 +271,8 @@ fn median_ratio(fixes: &[AtFix], idx: &[usize]) -> Option<f64> {
             (chord > 0.0).then(|| (b.s - a.s) / chord)
         })
         .collect();
-    (each.len() >= MEDIAN_STRETCHES).then(|| crate::statistics::median_of_finite(&each))
+    (each.len() >= MEDIAN_STRETCHES)
+        .then(|| (crate::statistics::median_of_finite(&each), each.len()))
 }
 
 /// Odometer distance against the GPS track length, over the stretches
@@ -298,13 +300,7 @@ pub(super) fn odometer_scale(fixes: &[AtFix], idx: &[usize], report: &mut CheckR
         return;
     }
     let (ratio, over) = match median_ratio(fixes, idx) {
-        Some(r) => (
-            r,
-            format!(
-                "the median over {} stretches; ",
-                idx.len().saturating_sub(1)
-            ),
-        ),
+        Some((r, n)) => (r, format!("the median over {n} stretches; ")),
         None => (odo / gps, String::new()),
     };
     report.odometer_per_gps = Some(ratio);
