@@ -169,17 +169,20 @@ fn over_stretches(fixes: &[AtFix], idx: &[usize]) -> (f64, f64) {
     for w in idx.windows(2) {
         let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
         odo += b.s - a.s;
-        gps += (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1]);
+        gps += chord_m(a, b);
     }
     (odo, gps)
+}
+
+/// The straight line from fix `a` to fix `b` (m).
+fn chord_m(a: &AtFix, b: &AtFix) -> f64 {
+    (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1])
 }
 
 /// Indices of fixes at least `length` (m) apart along the GPS track (each
 /// from the last one taken, in a straight line).
 fn stretches_along_track(fixes: &[AtFix], length: f64) -> Vec<usize> {
-    stretches_by(fixes, length, |a, b| {
-        (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1])
-    })
+    stretches_by(fixes, length, chord_m)
 }
 
 /// Indices of fixes at least `length` apart by `apart(from, to)`, each from
@@ -267,7 +270,7 @@ fn median_ratio(fixes: &[AtFix], idx: &[usize]) -> Option<(f64, usize)> {
         .windows(2)
         .filter_map(|w| {
             let (a, b) = (&fixes[w[0]], &fixes[w[1]]);
-            let chord = (b.en[0] - a.en[0]).hypot(b.en[1] - a.en[1]);
+            let chord = chord_m(a, b);
             (chord > 0.0).then(|| (b.s - a.s) / chord)
         })
         .collect();
