@@ -652,7 +652,7 @@ impl BiasTotal {
 impl FitReport {
     /// The report of `fit`, with the sigmas of its parameters.
     pub fn new(fit: &Reconstruction, elapsed_s: f64) -> Self {
-        Self::with_sigmas(fit, elapsed_s, fit.model().parameter_sigmas(fit.params()))
+        Self::with_sigmas(fit, elapsed_s, fit.model().reported_sigmas(fit.params()))
     }
 
     /// The report with the segment lengths' likelihoods filled in. Only the

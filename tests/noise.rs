@@ -283,25 +283,45 @@ fn the_path_sigma_ellipses_cover_the_truth_under_the_true_noise() {
     };
     settings.model.sigma_horizontal_m = 1.58;
     settings.model.gps_tau_s = Some(60.0);
-    let share = pooled_coverage(&settings);
+    let (share, band) = pooled_coverage(&settings, 21..25, 600.0);
     assert!((0.85..=0.99).contains(&share), "{share}");
+    // The band the map draws holds the truth about as often as it says.
+    assert!((0.85..=0.99).contains(&band), "band {band}");
 }
 
 /// Issue 14's target under the default settings: the noise estimated from
 /// each ride (wander, its time, jitter, the heights' own ratio and jitter).
 #[test]
 fn the_path_sigma_ellipses_cover_the_truth_under_the_estimated_noise() {
-    let share = pooled_coverage(&FitSettings::default());
+    let (share, band) = pooled_coverage(&FitSettings::default(), 21..25, 600.0);
     assert!((0.85..=0.99).contains(&share), "{share}");
+    assert!((0.85..=0.99).contains(&band), "band {band}");
 }
 
-/// The share of rows (every 100th) of four ten-minute rides whose truth
-/// lies inside the path's 95 % ellipse, fitted with `settings`; each ride's
-/// ellipses must not shrink in its outages.
-fn pooled_coverage(settings: &FitSettings) -> f64 {
+/// On rides of five minutes, a few of the GPS wander's correlation times,
+/// the ride pins the wander's short-lag spread but hardly its time, which
+/// comes out short; the band is therefore averaged over the time's 1-sigma
+/// range (`ModelSpec::band_specs`). Taken as known, the estimate's band held
+/// the truth at 67.3 % of these rides' rows (35-100 % by ride); averaged,
+/// at 78.6 % (measured).
+#[test]
+fn the_band_of_a_short_ride_is_averaged_over_what_it_cannot_pin() {
+    let (share, _) = pooled_coverage(&FitSettings::default(), 1..7, 300.0);
+    assert!(share >= 0.75, "{share}");
+}
+
+/// The share of rows (every 100th) of the simulated rides of `seeds`,
+/// `duration_s` long, whose truth lies inside the path's 95 % ellipse, and
+/// inside the map's 95 % band across the track, fitted with `settings`;
+/// each ride's ellipses must not shrink in its outages.
+fn pooled_coverage(
+    settings: &FitSettings,
+    seeds: std::ops::Range<u64>,
+    duration_s: f64,
+) -> (f64, f64) {
     let (mut inside, mut total, mut band_inside) = (0usize, 0usize, 0usize);
-    for seed in 21..25 {
-        let (sim, sig) = common::ride(seed, 600.0, &[]);
+    for seed in seeds {
+        let (sim, sig) = common::ride(seed, duration_s, &[]);
         let mut fit = Reconstruction::new(sig.clone(), settings.clone()).expect("fit");
         fit.finish();
         let path = fit.trajectory().p;
@@ -371,9 +391,7 @@ fn pooled_coverage(settings: &FitSettings) -> f64 {
         100.0 * share,
         100.0 * band_share
     );
-    // The band the map draws holds the truth about as often as it says.
-    assert!((0.85..=0.99).contains(&band_share), "band {band_share}");
-    share
+    (share, band_share)
 }
 
 /// The segment length the data prefer: every length tried has a finite

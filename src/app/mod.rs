@@ -424,7 +424,7 @@ impl GyropathApp {
                     ));
                     self.settings.fit.model.effects = default;
                     self.worker
-                        .send(Request::Settings(self.settings.fit.clone()));
+                        .send(Request::Settings(Box::new(self.settings.fit.clone())));
                 }
                 self.run_on_load = self.settings.auto_run;
                 self.worker.send(Request::Load(source));
@@ -524,7 +524,7 @@ impl GyropathApp {
             Command::Reset => self.worker.send(Request::Reset),
             Command::SettingsChanged => {
                 self.worker
-                    .send(Request::Settings(self.settings.fit.clone()));
+                    .send(Request::Settings(Box::new(self.settings.fit.clone())));
             }
             Command::DismissError => {
                 self.error = None;
@@ -540,7 +540,7 @@ impl GyropathApp {
             Command::AddEffect(id) => {
                 effects_panel::set_effect(&mut self.settings.fit.model.effects, &id, true);
                 self.worker
-                    .send(Request::Settings(self.settings.fit.clone()));
+                    .send(Request::Settings(Box::new(self.settings.fit.clone())));
                 self.worker.send(Request::Run);
             }
         }

@@ -118,7 +118,8 @@ pub enum Request {
     Step,
     /// Start the fit again from the start guess with the current settings.
     Reset,
-    Settings(FitSettings),
+    /// Boxed: the settings are most of the enum's size, sent once per change.
+    Settings(Box<FitSettings>),
     Export(ExportKind, PathBuf, Box<ReportExtras>),
     /// Rank the effects the current model lacks (runs beside the fit).
     Diagnose,
@@ -450,7 +451,7 @@ impl Worker {
                 self.restart_fit();
                 self.send(Update::Running(false));
             }
-            Request::Settings(settings) => self.apply_settings(settings),
+            Request::Settings(settings) => self.apply_settings(*settings),
             Request::Export(kind, path, extras) => self.export(kind, &path, &extras),
             Request::Diagnose => self.diagnose_in_background(),
             Request::LoadReference(path) => self.load_reference(&path),

@@ -72,6 +72,13 @@ pub struct ModelSpec {
     /// tails, a held value belongs to one ride's fixes.
     #[serde(skip)]
     pub held: Vec<HeldParam>,
+    /// The ends of the GPS error's correlation time's 1-sigma range (s),
+    /// over which the fit's uncertainty (the path's band, the reported
+    /// sigmas) is averaged (see [`ModelSpec::band_specs`]); `None`: drawn
+    /// under the fit's own settings. The noise search sets it. Not saved
+    /// with the settings: a range belongs to one ride.
+    #[serde(skip)]
+    pub band_taus: Option<(f64, f64)>,
 }
 
 /// A parameter held at `value` (internal units), named as the report names
@@ -123,11 +130,52 @@ impl Default for ModelSpec {
             increment: Increment::Exact,
             gps_tails: None,
             held: Vec::new(),
+            band_taus: None,
         }
     }
 }
 
 impl ModelSpec {
+    /// The two settings the fit's uncertainty is averaged over: these, with
+    /// the correlation time at either end of [`ModelSpec::band_taus`] and the
+    /// horizontal wander's sigma moved with it along the ridge the likelihood
+    /// follows, `sigma'^2 / tau' = sigma^2 / tau`; `None` for these settings
+    /// alone.
+    ///
+    /// Why: a ride pins the wander's short-lag spread, `2 sigma^2 dt / tau`
+    /// (`sigma^2 / tau` is what its likelihood curves in), much better than
+    /// its correlation time, and the path's absolute error is the wander's
+    /// slow part, which the time decides. A band drawn under the estimate
+    /// alone takes the time as known; on a ride only a few correlation times
+    /// long it is not, and it comes out short (the start position takes the
+    /// slow part as one offset that the restricted likelihood integrates out
+    /// unseen): on simulated 5-minute rides that band held the truth at
+    /// 76 % of the rows. Averaged over the time's posterior,
+    /// `Cov = (Cov(tau_-) + Cov(tau_+)) / 2` at its 1-sigma ends (the
+    /// two-point Gauss rule for a Gaussian in `ln tau`: exact for a
+    /// covariance cubic in it), it holds it at 86 %, and at 95 % on
+    /// 10-minute rides (93 % before; docs/uncertainty.md).
+    pub fn band_specs(&self) -> Option<[ModelSpec; 2]> {
+        let (tau, (low, high)) = (self.gps_tau_s?, self.band_taus?);
+        if !(0.0 < low && low < tau && tau < high && high.is_finite()) {
+            return None;
+        }
+        let at = |t: f64| {
+            let mut spec = self.clone();
+            // The heights keep their own jitter (by default it follows the
+            // horizontal one at the heights' ratio).
+            spec.gps_white_vertical_m = Some(
+                self.gps_white_vertical_m
+                    .unwrap_or(self.gps_white_m * self.sigma_vertical_m / self.sigma_horizontal_m),
+            );
+            spec.sigma_horizontal_m = self.sigma_horizontal_m * (t / tau).sqrt();
+            spec.gps_tau_s = Some(t);
+            spec.band_taus = None;
+            spec
+        };
+        Some([at(low), at(high)])
+    }
+
     /// The GPS error's correlation time per axis (east, north, up): the
     /// heights' own where set; `None` everywhere for independent fixes.
     pub fn gps_taus(&self) -> [Option<f64>; 3] {

@@ -75,6 +75,21 @@ impl Model {
         out
     }
 
+    /// [`Self::parameter_sigmas`] as the fit reports them: averaged over
+    /// [`crate::contract::ModelSpec::band_specs`] where the spec has them, as
+    /// the path's band is ([`Self::uncertainty_at`]). The tests that compare
+    /// two fits' sigmas (Hausman's) take each fit's own.
+    pub fn reported_sigmas(&self, theta: &[f64]) -> Vec<Option<f64>> {
+        let Some(specs) = self.spec.band_specs() else {
+            return self.parameter_sigmas(theta);
+        };
+        let each: Option<Vec<_>> = specs
+            .into_iter()
+            .map(|s| self.with_spec(s).ok().map(|m| m.parameter_sigmas(theta)))
+            .collect();
+        each.map_or_else(|| self.parameter_sigmas(theta), mean_sigmas)
+    }
+
     /// Per parameter the marginal sigma of its free column (`columns`), widened by `inflation`.
     fn sigmas_of(&self, m: &Marginals, columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
         let mut out = vec![None; self.n_params()];
@@ -95,13 +110,34 @@ impl Model {
     /// [`Self::uncertainty`] with the path's covariance kept only at `rows`
     /// (sorted; `Uncertainty::path[i]` is then row `rows[i]`): what a view
     /// that draws a few thousand points needs, without a long ride's every row.
+    ///
+    /// Averaged over [`crate::contract::ModelSpec::band_specs`] where the
+    /// spec has them: the path is this model's, its covariance and the
+    /// parameters' variances the mean of the two settings' (one sweep of the
+    /// path's derivatives serves both: they do not depend on the noise).
     pub fn uncertainty_at(&self, theta: &[f64], rows: Option<&[usize]>) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
-        let chain = self.chain_system(theta, &free)?;
-        let marginals = chain.marginals(rows.map_or(PathRows::All, PathRows::Only))?;
-        let inflation = self.residual_inflation(theta);
-        let params = self.sigmas_of(&marginals, chain.columns(), inflation);
-        drop(chain);
+        let which = rows.map_or(PathRows::All, PathRows::Only);
+        // Per setting: the marginals, their columns and the squared widening.
+        let solve = |m: &Model| -> Option<(Marginals, Vec<usize>, f64)> {
+            let chain = m.chain_system(theta, &free)?;
+            let marginals = chain.marginals(which)?;
+            let inflation = m.residual_inflation(theta);
+            Some((marginals, chain.columns().to_vec(), inflation))
+        };
+        let settings: Vec<(Marginals, Vec<usize>, f64)> = match self.spec.band_specs() {
+            Some(specs) => specs
+                .into_iter()
+                .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m)))
+                .collect::<Option<_>>()?,
+            None => vec![solve(self)?],
+        };
+        let params = mean_sigmas(
+            settings
+                .iter()
+                .map(|(m, columns, inflation)| self.sigmas_of(m, columns, *inflation))
+                .collect(),
+        );
         let all: Vec<usize>;
         let rows = match rows {
             Some(r) => r,
@@ -110,7 +146,7 @@ impl Model {
                 &all
             }
         };
-        let widen = inflation * inflation;
+        let share = 1.0 / settings.len() as f64;
         let mut path = vec![[f64::NAN; 4]; rows.len()];
         // Chunks side by side (the covariance at every row is most of the
         // work), each from the sums of those before it: one sweep without
@@ -147,9 +183,16 @@ impl Model {
             |out: &mut Option<(usize, usize, &mut [[f64; 4]])>, row, p, _, sums| {
                 let Some((start, k, out)) = out else { return };
                 while *k < rows.len() && rows[*k] == row {
-                    let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
+                    let mut c = [0.0; 4];
+                    for (marginals, _, inflation) in &settings {
+                        let one = marginals.path_covariance(row, p, |i| sums.dp(i, p));
+                        let w = share * inflation * inflation;
+                        for (a, b) in c.iter_mut().zip(one) {
+                            *a += w * b;
+                        }
+                    }
                     if let Some(slot) = out.get_mut(*k - *start) {
-                        *slot = c.map(|v| v * widen);
+                        *slot = c;
                     }
                     *k += 1;
                 }
@@ -319,6 +362,21 @@ impl PathArc {
         }
         cov
     }
+}
+
+/// Per parameter the root of the mean variance over `each` (one sigma list
+/// per setting); `None` where any setting has none.
+fn mean_sigmas(each: Vec<Vec<Option<f64>>>) -> Vec<Option<f64>> {
+    let n = each.iter().map(Vec::len).max().unwrap_or(0);
+    let share = 1.0 / each.len().max(1) as f64;
+    (0..n)
+        .map(|i| {
+            each.iter()
+                .map(|s| s.get(i).copied().flatten().map(|v| share * v * v))
+                .sum::<Option<f64>>()
+                .map(f64::sqrt)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -142,6 +142,11 @@ impl NoiseEstimate {
         if which.gps && self.gps_white_vertical_m.is_some() {
             spec.gps_white_vertical_m = self.gps_white_vertical_m;
         }
+        // The uncertainty is averaged over the correlation time's range
+        // (see `ModelSpec::band_specs`), where the ride bounds it.
+        let tau = &self.gps_tau_s;
+        spec.band_taus =
+            (which.gps && tau.estimated && tau.limit == Limit::None).then_some((tau.low, tau.high));
         spec
     }
 
