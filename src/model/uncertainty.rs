@@ -146,7 +146,23 @@ impl Model {
                 &all
             }
         };
+        // The settings' path covariances averaged: through one blended
+        // square root where their marginals share a structure (the cost of
+        // one), else row by row.
         let share = 1.0 / settings.len() as f64;
+        let blended = match settings.as_slice() {
+            [(a, _, ia), (b, _, ib)] => {
+                Marginals::blend(a, share * ia * ia, b, share * ib * ib).map(|m| vec![(m, 1.0)])
+            }
+            _ => None,
+        };
+        let parts: Vec<(&Marginals, f64)> = match &blended {
+            Some(one) => one.iter().map(|(m, w)| (m, *w)).collect(),
+            None => settings
+                .iter()
+                .map(|(m, _, inflation)| (m, share * inflation * inflation))
+                .collect(),
+        };
         let mut path = vec![[f64::NAN; 4]; rows.len()];
         // Chunks side by side (the covariance at every row is most of the
         // work), each from the sums of those before it: one sweep without
@@ -184,9 +200,8 @@ impl Model {
                 let Some((start, k, out)) = out else { return };
                 while *k < rows.len() && rows[*k] == row {
                     let mut c = [0.0; 4];
-                    for (marginals, _, inflation) in &settings {
+                    for &(marginals, w) in &parts {
                         let one = marginals.path_covariance(row, p, |i| sums.dp(i, p));
-                        let w = share * inflation * inflation;
                         for (a, b) in c.iter_mut().zip(one) {
                             *a += w * b;
                         }
@@ -505,6 +520,55 @@ mod tests {
             );
             assert_eq!(rows, m.signals.len());
         }
+    }
+
+    /// The uncertainty averaged over the correlation time's range (one
+    /// blended square root per stage, `ModelSpec::band_specs`) is the mean of
+    /// the two settings' own, row by row and parameter by parameter.
+    #[test]
+    fn the_band_averaged_over_the_range_is_the_mean_of_its_two_ends() {
+        let (m, p, _, _, _) = dense_case(Some(20.0), 1.2);
+        let mut spec = m.spec.clone();
+        spec.band_taus = Some((12.0, 45.0));
+        let averaged = m.with_spec(spec.clone()).unwrap().uncertainty(&p).unwrap();
+        let ends = spec.band_specs().expect("a range around the time");
+        assert_eq!(ends[1].gps_tau_s, Some(45.0));
+        let ratio = ends[1].sigma_horizontal_m.powi(2) / 45.0;
+        assert!((ratio - spec.sigma_horizontal_m.powi(2) / 20.0).abs() < 1e-12);
+        let each: Vec<Uncertainty> = ends
+            .into_iter()
+            .map(|s| m.with_spec(s).unwrap().uncertainty(&p).unwrap())
+            .collect();
+        for row in 0..m.signals.len() {
+            for k in 0..4 {
+                let mean = 0.5 * (each[0].path[row][k] + each[1].path[row][k]);
+                let got = averaged.path[row][k];
+                assert!(
+                    (got - mean).abs() <= 1e-9 * mean.abs().max(1e-6),
+                    "row {row}: {got} against {mean}"
+                );
+            }
+        }
+        for (i, got) in averaged.params.iter().enumerate() {
+            let (Some(a), Some(b)) = (each[0].params[i], each[1].params[i]) else {
+                assert!(got.is_none());
+                continue;
+            };
+            let mean = (0.5 * (a * a + b * b)).sqrt();
+            assert!((got.unwrap() - mean).abs() <= 1e-12 * mean, "parameter {i}");
+        }
+        // Through one blended square root, not the row-by-row fallback.
+        let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let ends: Vec<Marginals> = spec
+            .band_specs()
+            .unwrap()
+            .into_iter()
+            .map(|s| {
+                let chain = m.with_spec(s).unwrap().chain_system(&p, &free).unwrap();
+                chain.marginals(PathRows::All).unwrap()
+            })
+            .collect();
+        assert!(Marginals::blend(&ends[0], 0.5, &ends[1], 0.5).is_some());
     }
 
     /// On a long ride the backward pass stays sane: every row's horizontal

@@ -49,6 +49,64 @@ pub(super) struct StageCov {
     pub(super) l: DMatrix<f64>,
 }
 
+impl StageCov {
+    /// See [`Marginals::blend`].
+    fn blend(a: &StageCov, wa: f64, b: &StageCov, wb: f64) -> Option<StageCov> {
+        let same_cols = a.cols.len() == b.cols.len()
+            && a.cols.iter().zip(&b.cols).all(|(p, q)| match (p, q) {
+                (StageCol::Param(i, _), StageCol::Param(j, _)) => i == j,
+                (StageCol::S(i), StageCol::S(j)) => i == j,
+                _ => false,
+            });
+        if !(same_cols
+            && a.first_row == b.first_row
+            && a.spans == b.spans
+            && a.origin == b.origin
+            && a.l.nrows() == a.cols.len()
+            && b.l.nrows() == b.cols.len())
+        {
+            return None;
+        }
+        let k = a.cols.len();
+        let scale = |c: &StageCol| match *c {
+            StageCol::Param(_, inv) => inv,
+            StageCol::S(_) => 1.0,
+        };
+        let (na, nb) = (a.l.ncols(), b.l.ncols());
+        // The stacked square roots, transposed: rows are columns of `S L`.
+        let mut stacked = DMatrix::<f64>::zeros(na + nb, k);
+        for (r, (ca, cb)) in a.cols.iter().zip(&b.cols).enumerate() {
+            let (sa, sb) = (wa.sqrt() * scale(ca), wb.sqrt() * scale(cb));
+            for c in 0..na {
+                stacked[(c, r)] = sa * a.l[(r, c)];
+            }
+            for c in 0..nb {
+                stacked[(na + c, r)] = sb * b.l[(r, c)];
+            }
+        }
+        let r = if na + nb >= k {
+            stacked.qr().r()
+        } else {
+            stacked
+        };
+        let cols = a
+            .cols
+            .iter()
+            .map(|c| match *c {
+                StageCol::Param(i, _) => StageCol::Param(i, 1.0),
+                other => other,
+            })
+            .collect();
+        Some(StageCov {
+            first_row: a.first_row,
+            origin: a.origin,
+            cols,
+            spans: a.spans.clone(),
+            l: r.transpose(),
+        })
+    }
+}
+
 /// A column of a [`StageCov`]: a parameter (with `1 / sqrt(D)`: the unknown is scaled) or `s`.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum StageCol {
@@ -57,6 +115,32 @@ pub(super) enum StageCol {
 }
 
 impl Marginals {
+    /// `wa P_a + wb P_b`: the marginals of a mixture of two settings of one
+    /// model (the same stages, unknowns and blocks; only the noise differs),
+    /// each stage's square root the triangle of the QR of
+    /// `[sqrt(wa) S_a L_a | sqrt(wb) S_b L_b]^T` (`S` the unknowns' scaling,
+    /// taken out so that the two share one): `R^T R` is their weighted sum,
+    /// and the path's covariance at a row then costs what one setting's
+    /// does. `None` where the two differ in structure.
+    pub fn blend(a: &Marginals, wa: f64, b: &Marginals, wb: f64) -> Option<Marginals> {
+        if a.stages.len() != b.stages.len() || a.var.len() != b.var.len() {
+            return None;
+        }
+        let stages = a
+            .stages
+            .iter()
+            .zip(&b.stages)
+            .map(|(x, y)| StageCov::blend(x, wa, y, wb))
+            .collect::<Option<Vec<_>>>()?;
+        let var = a
+            .var
+            .iter()
+            .zip(&b.var)
+            .map(|(p, q)| wa * p + wb * q)
+            .collect();
+        Some(Marginals { var, stages })
+    }
+
     /// The covariance of the path at `row` (at `p`): `H P H^T = |H L|^2` with `H` the
     /// path's derivative with respect to the unknowns of the state it is seen
     /// in, `dp/dU = [e_k x (p - c)]`, `dp/dT = I` for `s` (every block complete
