@@ -18,11 +18,17 @@
 //! (how well the sigmas hold the truth, measured).
 
 use nalgebra::{DVector, Matrix2, Vector2};
+use rayon::prelude::*;
 
 use super::chain::PathRows;
 use super::normal::damped_solve;
 use super::{Marginals, Model};
 use crate::effects::Role;
+
+/// Rides with more fixes than this solve the two settings of an averaged
+/// uncertainty one after the other: each chain system holds about 3 kB per
+/// fix (as the noise search's evaluations side by side do).
+const SIDE_BY_SIDE_FIXES: usize = 10_000;
 
 /// Longest lag (fixes) of the residual autocorrelation that widens the sigmas.
 const MAX_LAG: usize = 120;
@@ -125,19 +131,6 @@ impl Model {
             let inflation = m.residual_inflation(theta);
             Some((marginals, chain.columns().to_vec(), inflation))
         };
-        let settings: Vec<(Marginals, Vec<usize>, f64)> = match self.spec.band_specs() {
-            Some(specs) => specs
-                .into_iter()
-                .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m)))
-                .collect::<Option<_>>()?,
-            None => vec![solve(self)?],
-        };
-        let params = mean_sigmas(
-            settings
-                .iter()
-                .map(|(m, columns, inflation)| self.sigmas_of(m, columns, *inflation))
-                .collect(),
-        );
         let all: Vec<usize>;
         let rows = match rows {
             Some(r) => r,
@@ -146,34 +139,78 @@ impl Model {
                 &all
             }
         };
-        // The settings' path covariances averaged: through one blended
-        // square root where their marginals share a structure (the cost of
-        // one), else row by row.
-        let share = 1.0 / settings.len() as f64;
-        let blended = match settings.as_slice() {
-            [(a, _, ia), (b, _, ib)] => {
-                Marginals::blend(a, share * ia * ia, b, share * ib * ib).map(|m| vec![(m, 1.0)])
-            }
-            _ => None,
-        };
-        let parts: Vec<(&Marginals, f64)> = match &blended {
-            Some(one) => one.iter().map(|(m, w)| (m, *w)).collect(),
-            None => settings
-                .iter()
-                .map(|(m, _, inflation)| (m, share * inflation * inflation))
-                .collect(),
-        };
         let mut path = vec![[f64::NAN; 4]; rows.len()];
+        let mut sigmas = Vec::with_capacity(2);
+        match self.spec.band_specs() {
+            None => {
+                let (m, columns, inflation) = solve(self)?;
+                sigmas.push(self.sigmas_of(&m, &columns, inflation));
+                self.add_path_covariance(
+                    theta,
+                    &free,
+                    rows,
+                    &[(m, inflation * inflation)],
+                    &mut path,
+                );
+            }
+            // Side by side where two chain systems fit in memory at once,
+            // their path covariances averaged through one blended square
+            // root (the cost of one sweep of the rows).
+            Some(specs) if self.observed_fixes() <= SIDE_BY_SIDE_FIXES => {
+                let solved: Vec<(Marginals, Vec<usize>, f64)> = specs
+                    .into_par_iter()
+                    .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m)))
+                    .collect::<Option<_>>()?;
+                let mut parts = Vec::with_capacity(2);
+                for (m, columns, inflation) in solved {
+                    sigmas.push(self.sigmas_of(&m, &columns, inflation));
+                    parts.push((m, 0.5 * inflation * inflation));
+                }
+                if let (Some((b, wb)), Some((a, wa))) = (parts.pop(), parts.pop()) {
+                    parts = match Marginals::blend(a, wa, b, wb) {
+                        Ok(m) => vec![(m, 1.0)],
+                        Err((a, b)) => vec![(a, wa), (b, wb)],
+                    };
+                }
+                self.add_path_covariance(theta, &free, rows, &parts, &mut path);
+            }
+            // One after the other, each swept into the rows and let go (a
+            // 6-hour ride's marginals are some 60 MB each).
+            Some(specs) => {
+                for s in specs {
+                    let (m, columns, inflation) = solve(&self.with_spec(s).ok()?)?;
+                    sigmas.push(self.sigmas_of(&m, &columns, inflation));
+                    let parts = [(m, 0.5 * inflation * inflation)];
+                    self.add_path_covariance(theta, &free, rows, &parts, &mut path);
+                }
+            }
+        }
+        let params = mean_sigmas(sigmas);
+        self.add_along_track_spread(theta, rows, &mut path);
+        Some(Uncertainty { params, path })
+    }
+
+    /// Adds `sum_k w_k H P_k H^T` over `parts` (`(P_k, w_k)`) to `path` at
+    /// `rows` (a row still NaN takes it as it is): one sweep of the path's
+    /// derivatives, in chunks side by side.
+    fn add_path_covariance(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        rows: &[usize],
+        parts: &[(Marginals, f64)],
+        path: &mut [[f64; 4]],
+    ) {
         // Chunks side by side (the covariance at every row is most of the
         // work), each from the sums of those before it: one sweep without
         // visits finds them when there is more than one chunk.
-        let befores = (self.prefix_chunk_count(theta, &free) > 1).then(|| {
-            self.prefix_sweep_chunked(theta, &free, &[], None, |_| (), |_, _, _, _, _| {})
+        let befores = (self.prefix_chunk_count(theta, free) > 1).then(|| {
+            self.prefix_sweep_chunked(theta, free, &[], None, |_| (), |_, _, _, _, _| {})
                 .befores(self.n_params())
         });
         // Each chunk writes the rows it visits in place (a 6-hour ride's
         // covariances are 69 MB: gathered apart and copied they were twice that).
-        let spans = self.prefix_chunk_spans(theta, &free, rows);
+        let spans = self.prefix_chunk_spans(theta, free, rows);
         let mut slices = Vec::with_capacity(spans.len());
         let mut rest = &mut path[..];
         let mut at = 0;
@@ -186,7 +223,7 @@ impl Model {
         let slices = std::sync::Mutex::new(slices);
         self.prefix_sweep_chunked(
             theta,
-            &free,
+            free,
             rows,
             befores,
             |c| {
@@ -200,21 +237,25 @@ impl Model {
                 let Some((start, k, out)) = out else { return };
                 while *k < rows.len() && rows[*k] == row {
                     let mut c = [0.0; 4];
-                    for &(marginals, w) in &parts {
+                    for (marginals, w) in parts {
                         let one = marginals.path_covariance(row, p, |i| sums.dp(i, p));
                         for (a, b) in c.iter_mut().zip(one) {
                             *a += w * b;
                         }
                     }
                     if let Some(slot) = out.get_mut(*k - *start) {
-                        *slot = c;
+                        if slot[0].is_nan() {
+                            *slot = c;
+                        } else {
+                            for (a, b) in slot.iter_mut().zip(c) {
+                                *a += b;
+                            }
+                        }
                     }
                     *k += 1;
                 }
             },
         );
-        self.add_along_track_spread(theta, rows, &mut path);
-        Some(Uncertainty { params, path })
     }
 
     /// A bridged distance's own spread (`Effect::along_track_variance`,
@@ -568,7 +609,9 @@ mod tests {
                 chain.marginals(PathRows::All).unwrap()
             })
             .collect();
-        assert!(Marginals::blend(&ends[0], 0.5, &ends[1], 0.5).is_some());
+        let mut ends = ends.into_iter();
+        let (a, b) = (ends.next().unwrap(), ends.next().unwrap());
+        assert!(Marginals::blend(a, 0.5, b, 0.5).is_ok());
     }
 
     /// On a long ride the backward pass stays sane: every row's horizontal

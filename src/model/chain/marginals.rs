@@ -50,23 +50,29 @@ pub(super) struct StageCov {
 }
 
 impl StageCov {
-    /// See [`Marginals::blend`].
-    fn blend(a: &StageCov, wa: f64, b: &StageCov, wb: f64) -> Option<StageCov> {
-        let same_cols = a.cols.len() == b.cols.len()
-            && a.cols.iter().zip(&b.cols).all(|(p, q)| match (p, q) {
-                (StageCol::Param(i, _), StageCol::Param(j, _)) => i == j,
-                (StageCol::S(i), StageCol::S(j)) => i == j,
-                _ => false,
-            });
-        if !(same_cols
-            && a.first_row == b.first_row
-            && a.spans == b.spans
-            && a.origin == b.origin
-            && a.l.nrows() == a.cols.len()
-            && b.l.nrows() == b.cols.len())
-        {
-            return None;
-        }
+    /// Whether `other` is this stage under other noise settings: the same
+    /// rows, unknowns, blocks and origin.
+    fn blends_with(&self, other: &StageCov) -> bool {
+        let same_cols = self.cols.len() == other.cols.len()
+            && self
+                .cols
+                .iter()
+                .zip(&other.cols)
+                .all(|(p, q)| match (p, q) {
+                    (StageCol::Param(i, _), StageCol::Param(j, _)) => i == j,
+                    (StageCol::S(i), StageCol::S(j)) => i == j,
+                    _ => false,
+                });
+        same_cols
+            && self.first_row == other.first_row
+            && self.spans == other.spans
+            && self.origin == other.origin
+            && self.l.nrows() == self.cols.len()
+            && other.l.nrows() == other.cols.len()
+    }
+
+    /// See [`Marginals::blend`] (the two [`StageCov::blends_with`] each other).
+    fn blend(a: &StageCov, wa: f64, b: &StageCov, wb: f64) -> StageCov {
         let k = a.cols.len();
         let scale = |c: &StageCol| match *c {
             StageCol::Param(_, inv) => inv,
@@ -97,13 +103,13 @@ impl StageCov {
                 other => other,
             })
             .collect();
-        Some(StageCov {
+        StageCov {
             first_row: a.first_row,
             origin: a.origin,
             cols,
             spans: a.spans.clone(),
             l: r.transpose(),
-        })
+        }
     }
 }
 
@@ -121,24 +127,36 @@ impl Marginals {
     /// `[sqrt(wa) S_a L_a | sqrt(wb) S_b L_b]^T` (`S` the unknowns' scaling,
     /// taken out so that the two share one): `R^T R` is their weighted sum,
     /// and the path's covariance at a row then costs what one setting's
-    /// does. `None` where the two differ in structure.
-    pub fn blend(a: &Marginals, wa: f64, b: &Marginals, wb: f64) -> Option<Marginals> {
-        if a.stages.len() != b.stages.len() || a.var.len() != b.var.len() {
-            return None;
+    /// does. The two are consumed stage by stage (on a 6-hour ride each
+    /// holds some 80 MB); handed back where they differ in structure.
+    pub fn blend(
+        a: Marginals,
+        wa: f64,
+        b: Marginals,
+        wb: f64,
+    ) -> Result<Marginals, (Marginals, Marginals)> {
+        let same = a.stages.len() == b.stages.len()
+            && a.var.len() == b.var.len()
+            && a.stages
+                .iter()
+                .zip(&b.stages)
+                .all(|(x, y)| x.blends_with(y));
+        if !same {
+            return Err((a, b));
         }
-        let stages = a
-            .stages
-            .iter()
-            .zip(&b.stages)
-            .map(|(x, y)| StageCov::blend(x, wa, y, wb))
-            .collect::<Option<Vec<_>>>()?;
         let var = a
             .var
             .iter()
             .zip(&b.var)
             .map(|(p, q)| wa * p + wb * q)
             .collect();
-        Some(Marginals { var, stages })
+        let stages = a
+            .stages
+            .into_iter()
+            .zip(b.stages)
+            .map(|(x, y)| StageCov::blend(&x, wa, &y, wb))
+            .collect();
+        Ok(Marginals { var, stages })
     }
 
     /// The covariance of the path at `row` (at `p`): `H P H^T = |H L|^2` with `H` the
