@@ -270,9 +270,18 @@ fn uncertainty(input: &Input, band: &[BandPoint]) -> Option<Figure> {
     Some(Figure {
         id: "uncertainty".into(),
         title: "How sure the path is".into(),
-        caption: "How far across the track the path may be (95 %), from the fit's posterior (GPS outages shaded). \
-                  Under a GPS error that wanders, the path can be no surer than the wander, fixes or not."
-            .into(),
+        caption: format!(
+            "How far across the track the path may be (95 %), from the fit's posterior (GPS outages shaded){}. \
+             Under a GPS error that wanders, the path can be no surer than the wander, fixes or not.",
+            input
+                .model
+                .spec
+                .band_taus
+                .map_or(String::new(), |(lo, hi)| format!(
+                    ", averaged over the GPS error's correlation time from {lo:.0} to {hi:.0} s \
+                 (its 1-sigma range: the ride pins the wander's spread better than its time)"
+                ))
+        ),
         svg: s.finish(),
     })
 }
