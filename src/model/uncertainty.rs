@@ -22,7 +22,7 @@ use rayon::prelude::*;
 
 use super::chain::PathRows;
 use super::normal::damped_solve;
-use super::{Marginals, Model};
+use super::{ChainSystem, Marginals, Model};
 use crate::effects::Role;
 
 /// Rides with more fixes than this solve the two settings of an averaged
@@ -124,13 +124,19 @@ impl Model {
     pub fn uncertainty_at(&self, theta: &[f64], rows: Option<&[usize]>) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let which = rows.map_or(PathRows::All, PathRows::Only);
-        // Per setting: the marginals, their columns and the squared widening.
-        let solve = |m: &Model| -> Option<(Marginals, Vec<usize>, f64)> {
-            let chain = m.chain_system(theta, &free)?;
-            let marginals = chain.marginals(which)?;
-            let inflation = m.residual_inflation(theta);
-            Some((marginals, chain.columns().to_vec(), inflation))
-        };
+        // Per setting: the marginals, their columns and the squared widening,
+        // from the ride's linearisation `base` where one is at hand (the
+        // settings differ only in how the fixes are whitened).
+        let solve =
+            |m: &Model, base: Option<&ChainSystem>| -> Option<(Marginals, Vec<usize>, f64)> {
+                let chain = match base {
+                    Some(base) => m.chain_system_like(base, theta)?,
+                    None => m.chain_system(theta, &free)?,
+                };
+                let marginals = chain.marginals(which)?;
+                let inflation = m.residual_inflation(theta);
+                Some((marginals, chain.columns().to_vec(), inflation))
+            };
         let all: Vec<usize>;
         let rows = match rows {
             Some(r) => r,
@@ -143,7 +149,7 @@ impl Model {
         let mut sigmas = Vec::with_capacity(2);
         match self.spec.band_specs() {
             None => {
-                let (m, columns, inflation) = solve(self)?;
+                let (m, columns, inflation) = solve(self, None)?;
                 sigmas.push(self.sigmas_of(&m, &columns, inflation));
                 self.add_path_covariance(
                     theta,
@@ -157,10 +163,12 @@ impl Model {
             // their path covariances averaged through one blended square
             // root (the cost of one sweep of the rows).
             Some(specs) if self.observed_fixes() <= SIDE_BY_SIDE_FIXES => {
+                let base = self.chain_system(theta, &free)?;
                 let solved: Vec<(Marginals, Vec<usize>, f64)> = specs
                     .into_par_iter()
-                    .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m)))
+                    .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m, Some(&base))))
                     .collect::<Option<_>>()?;
+                drop(base);
                 let mut parts = Vec::with_capacity(2);
                 for (m, columns, inflation) in solved {
                     sigmas.push(self.sigmas_of(&m, &columns, inflation));
@@ -178,7 +186,7 @@ impl Model {
             // 6-hour ride's marginals are some 60 MB each).
             Some(specs) => {
                 for s in specs {
-                    let (m, columns, inflation) = solve(&self.with_spec(s).ok()?)?;
+                    let (m, columns, inflation) = solve(&self.with_spec(s).ok()?, None)?;
                     sigmas.push(self.sigmas_of(&m, &columns, inflation));
                     let parts = [(m, 0.5 * inflation * inflation)];
                     self.add_path_covariance(theta, &free, rows, &parts, &mut path);
