@@ -86,14 +86,64 @@ impl Model {
     /// the path's band is ([`Self::uncertainty_at`]). The tests that compare
     /// two fits' sigmas (Hausman's) take each fit's own.
     pub fn reported_sigmas(&self, theta: &[f64]) -> Vec<Option<f64>> {
-        let Some(specs) = self.spec.band_specs() else {
+        let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        if self.spec.band_specs().is_none() {
             return self.parameter_sigmas(theta);
+        }
+        match self.solved_settings(theta, &free, PathRows::None) {
+            Some(solved) => mean_sigmas(
+                solved
+                    .iter()
+                    .map(|(m, columns, inflation)| self.sigmas_of(m, columns, *inflation))
+                    .collect(),
+            ),
+            None => self.parameter_sigmas(theta),
+        }
+    }
+
+    /// The marginals (at `which` rows), their columns and the widening of
+    /// each setting the uncertainty is drawn under: this model's own, or the
+    /// two ends of [`crate::contract::ModelSpec::band_specs`], solved side by
+    /// side from one linearisation of the ride (the settings differ only in
+    /// how the fixes are whitened); on rides over [`SIDE_BY_SIDE_FIXES`] one
+    /// after the other, each from its own, so that one chain system is held
+    /// at a time.
+    fn solved_settings(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        which: PathRows,
+    ) -> Option<Vec<(Marginals, Vec<usize>, f64)>> {
+        let solve = |m: &Model, chain: ChainSystem| -> Option<(Marginals, Vec<usize>, f64)> {
+            let marginals = chain.marginals(which)?;
+            Some((
+                marginals,
+                chain.columns().to_vec(),
+                m.residual_inflation(theta),
+            ))
         };
-        let each: Option<Vec<_>> = specs
-            .into_iter()
-            .map(|s| self.with_spec(s).ok().map(|m| m.parameter_sigmas(theta)))
-            .collect();
-        each.map_or_else(|| self.parameter_sigmas(theta), mean_sigmas)
+        let Some(specs) = self.spec.band_specs() else {
+            return Some(vec![solve(self, self.chain_system(theta, free)?)?]);
+        };
+        if self.observed_fixes() > SIDE_BY_SIDE_FIXES {
+            return specs
+                .into_iter()
+                .map(|s| {
+                    let m = self.with_spec(s).ok()?;
+                    let chain = m.chain_system(theta, free)?;
+                    solve(&m, chain)
+                })
+                .collect();
+        }
+        let base = self.chain_system(theta, free)?;
+        specs
+            .into_par_iter()
+            .map(|s| {
+                let m = self.with_spec(s).ok()?;
+                let chain = m.chain_system_like(&base, theta)?;
+                solve(&m, chain)
+            })
+            .collect()
     }
 
     /// Per parameter the marginal sigma of its free column (`columns`), widened by `inflation`.
@@ -124,19 +174,6 @@ impl Model {
     pub fn uncertainty_at(&self, theta: &[f64], rows: Option<&[usize]>) -> Option<Uncertainty> {
         let free = self.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
         let which = rows.map_or(PathRows::All, PathRows::Only);
-        // Per setting: the marginals, their columns and the squared widening,
-        // from the ride's linearisation `base` where one is at hand (the
-        // settings differ only in how the fixes are whitened).
-        let solve =
-            |m: &Model, base: Option<&ChainSystem>| -> Option<(Marginals, Vec<usize>, f64)> {
-                let chain = match base {
-                    Some(base) => m.chain_system_like(base, theta)?,
-                    None => m.chain_system(theta, &free)?,
-                };
-                let marginals = chain.marginals(which)?;
-                let inflation = m.residual_inflation(theta);
-                Some((marginals, chain.columns().to_vec(), inflation))
-            };
         let all: Vec<usize>;
         let rows = match rows {
             Some(r) => r,
@@ -148,49 +185,40 @@ impl Model {
         let mut path = vec![[f64::NAN; 4]; rows.len()];
         let mut sigmas = Vec::with_capacity(2);
         match self.spec.band_specs() {
-            None => {
-                let (m, columns, inflation) = solve(self, None)?;
-                sigmas.push(self.sigmas_of(&m, &columns, inflation));
-                self.add_path_covariance(
-                    theta,
-                    &free,
-                    rows,
-                    &[(m, inflation * inflation)],
-                    &mut path,
-                );
+            // One after the other on a long ride, each swept into the rows
+            // and let go (a 6-hour ride's marginals are some 60 MB each).
+            Some(specs) if self.observed_fixes() > SIDE_BY_SIDE_FIXES => {
+                for s in specs {
+                    let m = self.with_spec(s).ok()?;
+                    let chain = m.chain_system(theta, &free)?;
+                    let marginals = chain.marginals(which)?;
+                    let (columns, inflation) =
+                        (chain.columns().to_vec(), m.residual_inflation(theta));
+                    drop(chain);
+                    sigmas.push(self.sigmas_of(&marginals, &columns, inflation));
+                    let parts = [(marginals, 0.5 * inflation * inflation)];
+                    self.add_path_covariance(theta, &free, rows, &parts, &mut path);
+                }
             }
-            // Side by side where two chain systems fit in memory at once,
-            // their path covariances averaged through one blended square
-            // root (the cost of one sweep of the rows).
-            Some(specs) if self.observed_fixes() <= SIDE_BY_SIDE_FIXES => {
-                let base = self.chain_system(theta, &free)?;
-                let solved: Vec<(Marginals, Vec<usize>, f64)> = specs
-                    .into_par_iter()
-                    .map(|s| self.with_spec(s).ok().and_then(|m| solve(&m, Some(&base))))
-                    .collect::<Option<_>>()?;
-                drop(base);
+            // Else at once; two settings' path covariances averaged through
+            // one blended square root (the cost of one sweep of the rows).
+            _ => {
+                let solved = self.solved_settings(theta, &free, which)?;
+                let share = 1.0 / solved.len() as f64;
                 let mut parts = Vec::with_capacity(2);
                 for (m, columns, inflation) in solved {
                     sigmas.push(self.sigmas_of(&m, &columns, inflation));
-                    parts.push((m, 0.5 * inflation * inflation));
+                    parts.push((m, share * inflation * inflation));
                 }
-                if let (Some((b, wb)), Some((a, wa))) = (parts.pop(), parts.pop()) {
+                if parts.len() == 2
+                    && let (Some((b, wb)), Some((a, wa))) = (parts.pop(), parts.pop())
+                {
                     parts = match Marginals::blend(a, wa, b, wb) {
                         Ok(m) => vec![(m, 1.0)],
                         Err((a, b)) => vec![(a, wa), (b, wb)],
                     };
                 }
                 self.add_path_covariance(theta, &free, rows, &parts, &mut path);
-            }
-            // One after the other, each swept into the rows and let go (a
-            // 6-hour ride's marginals are some 60 MB each).
-            Some(specs) => {
-                for s in specs {
-                    let (m, columns, inflation) = solve(&self.with_spec(s).ok()?, None)?;
-                    sigmas.push(self.sigmas_of(&m, &columns, inflation));
-                    let parts = [(m, 0.5 * inflation * inflation)];
-                    self.add_path_covariance(theta, &free, rows, &parts, &mut path);
-                }
             }
         }
         let params = mean_sigmas(sigmas);
