@@ -114,14 +114,7 @@ impl Model {
         free: &[bool],
         which: PathRows,
     ) -> Option<Vec<(Marginals, Vec<usize>, f64)>> {
-        let solve = |m: &Model, chain: ChainSystem| -> Option<(Marginals, Vec<usize>, f64)> {
-            let marginals = chain.marginals(which)?;
-            Some((
-                marginals,
-                chain.columns().to_vec(),
-                m.residual_inflation(theta),
-            ))
-        };
+        let solve = |m: &Model, chain: ChainSystem| m.solved(chain, theta, which);
         let Some(specs) = self.spec.band_specs() else {
             return Some(vec![solve(self, self.chain_system(theta, free)?)?]);
         };
@@ -144,6 +137,22 @@ impl Model {
                 solve(&m, chain)
             })
             .collect()
+    }
+
+    /// The marginals of `chain` (this model's, at `theta`) at `which` rows,
+    /// its columns and this model's widening; the chain is let go here.
+    fn solved(
+        &self,
+        chain: ChainSystem,
+        theta: &[f64],
+        which: PathRows,
+    ) -> Option<(Marginals, Vec<usize>, f64)> {
+        let marginals = chain.marginals(which)?;
+        Some((
+            marginals,
+            chain.columns().to_vec(),
+            self.residual_inflation(theta),
+        ))
     }
 
     /// Per parameter the marginal sigma of its free column (`columns`), widened by `inflation`.
@@ -190,11 +199,8 @@ impl Model {
             Some(specs) if self.observed_fixes() > SIDE_BY_SIDE_FIXES => {
                 for s in specs {
                     let m = self.with_spec(s).ok()?;
-                    let chain = m.chain_system(theta, &free)?;
-                    let marginals = chain.marginals(which)?;
-                    let (columns, inflation) =
-                        (chain.columns().to_vec(), m.residual_inflation(theta));
-                    drop(chain);
+                    let (marginals, columns, inflation) =
+                        m.solved(m.chain_system(theta, &free)?, theta, which)?;
                     sigmas.push(self.sigmas_of(&marginals, &columns, inflation));
                     let parts = [(marginals, 0.5 * inflation * inflation)];
                     self.add_path_covariance(theta, &free, rows, &parts, &mut path);

@@ -582,39 +582,21 @@ mod tests {
         // The log's z in deg/s within its precision, about as good as a
         // horizontal axis that sees a share of the turn: z (the bicycle
         // above); far from deg/s, or clearly worse, it is not.
-        let with_sigma = |fit: [(f64, f64, f64); 3]| fit.to_vec();
-        assert_eq!(
-            vertical_by_course(&with_sigma([
-                (-13.2, 0.35, 6.4),
-                (-2.6, 0.49, 0.94),
-                (0.98, 0.28, 0.56)
-            ])),
-            2
-        );
-        assert_eq!(
-            vertical_by_course(&with_sigma([
-                (4.8, 0.52, 1.6),
-                (0.8, 0.56, 0.25),
-                (7.0, 0.27, 4.1)
-            ])),
-            1
-        );
-        assert_eq!(
-            vertical_by_course(&with_sigma([
-                (2.87, 0.04, 2.0),
-                (1.22, 0.30, 0.25),
-                (1.27, 0.01, 1.61)
-            ])),
-            1
-        );
-        assert_eq!(
-            vertical_by_course(&with_sigma([
-                (0.5, 0.05, 0.1),
-                (1.0, 0.9, 0.1),
-                (1.0, 0.7, 0.1)
-            ])),
-            1
-        );
+        let cases = [
+            (
+                [(-13.2, 0.35, 6.4), (-2.6, 0.49, 0.94), (0.98, 0.28, 0.56)],
+                2,
+            ),
+            ([(4.8, 0.52, 1.6), (0.8, 0.56, 0.25), (7.0, 0.27, 4.1)], 1),
+            (
+                [(2.87, 0.04, 2.0), (1.22, 0.30, 0.25), (1.27, 0.01, 1.61)],
+                1,
+            ),
+            ([(0.5, 0.05, 0.1), (1.0, 0.9, 0.1), (1.0, 0.7, 0.1)], 1),
+        ];
+        for (fit, vertical) in cases {
+            assert_eq!(vertical_by_course(&fit), vertical, "{fit:?}");
+        }
     }
 
     /// An axis that only shares the steady turn (the gyro's bias turns

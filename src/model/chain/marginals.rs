@@ -128,7 +128,7 @@ impl Marginals {
     /// taken out so that the two share one): `R^T R` is their weighted sum,
     /// and the path's covariance at a row then costs what one setting's
     /// does. The two are consumed stage by stage (on a 6-hour ride each
-    /// holds some 80 MB); handed back where they differ in structure.
+    /// holds some 60 MB); handed back where they differ in structure.
     pub fn blend(
         a: Marginals,
         wa: f64,
