@@ -114,29 +114,42 @@ impl Model {
         free: &[bool],
         which: PathRows,
     ) -> Option<Vec<(Marginals, Vec<usize>, f64)>> {
-        let solve = |m: &Model, chain: ChainSystem| m.solved(chain, theta, which);
         let Some(specs) = self.spec.band_specs() else {
-            return Some(vec![solve(self, self.chain_system(theta, free)?)?]);
+            return Some(vec![self.solved(
+                self.chain_system(theta, free)?,
+                theta,
+                which,
+            )?]);
         };
         if self.observed_fixes() > SIDE_BY_SIDE_FIXES {
             return specs
                 .into_iter()
-                .map(|s| {
-                    let m = self.with_spec(s).ok()?;
-                    let chain = m.chain_system(theta, free)?;
-                    solve(&m, chain)
-                })
+                .map(|s| self.solved_under(s, None, theta, free, which))
                 .collect();
         }
         let base = self.chain_system(theta, free)?;
         specs
             .into_par_iter()
-            .map(|s| {
-                let m = self.with_spec(s).ok()?;
-                let chain = m.chain_system_like(&base, theta)?;
-                solve(&m, chain)
-            })
+            .map(|s| self.solved_under(s, Some(&base), theta, free, which))
             .collect()
+    }
+
+    /// [`Self::solved`] for this model under `spec` (one of the band's
+    /// settings): from `base`'s linearisation where given, else its own.
+    fn solved_under(
+        &self,
+        spec: crate::contract::ModelSpec,
+        base: Option<&ChainSystem>,
+        theta: &[f64],
+        free: &[bool],
+        which: PathRows,
+    ) -> Option<(Marginals, Vec<usize>, f64)> {
+        let m = self.with_spec(spec).ok()?;
+        let chain = match base {
+            Some(b) => m.chain_system_like(b, theta)?,
+            None => m.chain_system(theta, free)?,
+        };
+        m.solved(chain, theta, which)
     }
 
     /// The marginals of `chain` (this model's, at `theta`) at `which` rows,
@@ -197,12 +210,12 @@ impl Model {
             // One after the other on a long ride, each swept into the rows
             // and let go (a 6-hour ride's marginals are some 60 MB each).
             Some(specs) if self.observed_fixes() > SIDE_BY_SIDE_FIXES => {
+                let share = 1.0 / specs.len() as f64;
                 for s in specs {
-                    let m = self.with_spec(s).ok()?;
                     let (marginals, columns, inflation) =
-                        m.solved(m.chain_system(theta, &free)?, theta, which)?;
+                        self.solved_under(s, None, theta, &free, which)?;
                     sigmas.push(self.sigmas_of(&marginals, &columns, inflation));
-                    let parts = [(marginals, 0.5 * inflation * inflation)];
+                    let parts = [(marginals, share * inflation * inflation)];
                     self.add_path_covariance(theta, &free, rows, &parts, &mut path);
                 }
             }
