@@ -13,6 +13,9 @@ use super::observe::{ObsValue, Whitener};
 /// Unit tests use short chunks so that their short rides exercise the chaining.
 pub(crate) const CHUNK_ROWS: usize = if cfg!(test) { 500 } else { 90_000 };
 const MAX_CHUNKS: usize = 64;
+/// Rows whose corrected signals [`Model::sweep_from`] makes at a time (a few
+/// MB; small in tests, so that short rides cross blocks too).
+const SWEEP_BLOCK_ROWS: usize = if cfg!(test) { 700 } else { 65_536 };
 
 /// A row and the attitude and position there, where a sweep starts.
 pub(crate) type Start = (usize, UnitQuaternion<f64>, Vector3<f64>);
@@ -183,19 +186,27 @@ impl Model {
         (first, mut q, mut p): Start,
         mut visit: impl FnMut(usize, &UnitQuaternion<f64>, &Vector3<f64>, &Vector3<f64>, f64),
     ) {
-        let rows = (first, self.horizon());
-        let (rates, _) = self.corrected_rates(theta, rows, false);
-        let (dist, _) = self.corrected_distances(theta, rows, false);
         let (f, _) = self.forward_axis(theta);
         let inc = self.spec.increment;
         visit(first, &q, &p, &Vector3::zeros(), 0.0);
         let sig = &self.signals;
-        for j in first + 1..self.horizon() {
-            let th = rates[j - first] * sig.dt[j];
-            q *= inc.quaternion(&th);
-            let d = dist[j - first];
-            p += q * (f * d);
-            visit(j, &q, &p, &th, d);
+        // The corrected signals a block of rows at a time (every effect
+        // corrects a row from its own inputs): a 6-hour ride's at once were
+        // 69 MB, the peak of writing its path.
+        let end = self.horizon();
+        let mut a = first + 1;
+        while a < end {
+            let b = (a + SWEEP_BLOCK_ROWS).min(end);
+            let (rates, _) = self.corrected_rates(theta, (a, b), false);
+            let (dist, _) = self.corrected_distances(theta, (a, b), false);
+            for j in a..b {
+                let th = rates[j - a] * sig.dt[j];
+                q *= inc.quaternion(&th);
+                let d = dist[j - a];
+                p += q * (f * d);
+                visit(j, &q, &p, &th, d);
+            }
+            a = b;
         }
     }
 

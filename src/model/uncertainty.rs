@@ -68,7 +68,7 @@ impl Model {
         if let Some(chain) = self.chain_system(theta, &free) {
             return chain.marginals(PathRows::None).map_or_else(
                 || vec![None; self.n_params()],
-                |m| self.sigmas_of(&m, chain.columns(), inflation),
+                |m| self.sigmas_of(&m.var, chain.columns(), inflation),
             );
         }
         let mut out = vec![None; self.n_params()];
@@ -94,7 +94,7 @@ impl Model {
             Some(solved) => mean_sigmas(
                 solved
                     .iter()
-                    .map(|(m, columns, inflation)| self.sigmas_of(m, columns, *inflation))
+                    .map(|(m, columns, inflation)| self.sigmas_of(&m.var, columns, *inflation))
                     .collect(),
             ),
             None => self.parameter_sigmas(theta),
@@ -168,10 +168,11 @@ impl Model {
         ))
     }
 
-    /// Per parameter the marginal sigma of its free column (`columns`), widened by `inflation`.
-    fn sigmas_of(&self, m: &Marginals, columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
+    /// Per parameter the marginal sigma of its free column (`columns`, with
+    /// variances `var`), widened by `inflation`.
+    fn sigmas_of(&self, var: &[f64], columns: &[usize], inflation: f64) -> Vec<Option<f64>> {
         let mut out = vec![None; self.n_params()];
-        for (&v, &i) in m.var.iter().zip(columns) {
+        for (&v, &i) in var.iter().zip(columns) {
             out[i] = Some(inflation * v.max(0.0).sqrt());
         }
         out
@@ -204,56 +205,68 @@ impl Model {
                 &all
             }
         };
+        let (marginals, weight, params) = self.drawn_marginals(theta, &free, which)?;
         let mut path = vec![[f64::NAN; 4]; rows.len()];
-        let mut sigmas = Vec::with_capacity(2);
-        match self.spec.band_specs() {
-            // One after the other on a long ride, each swept into the rows
-            // and let go (a 6-hour ride's marginals are some 60 MB each).
-            Some(specs) if self.observed_fixes() > SIDE_BY_SIDE_FIXES => {
-                let share = 1.0 / specs.len() as f64;
-                for s in specs {
-                    let (marginals, columns, inflation) =
-                        self.solved_under(s, None, theta, &free, which)?;
-                    sigmas.push(self.sigmas_of(&marginals, &columns, inflation));
-                    let parts = [(marginals, share * inflation * inflation)];
-                    self.add_path_covariance(theta, &free, rows, &parts, &mut path);
-                }
-            }
-            // Else at once; two settings' path covariances averaged through
-            // one blended square root (the cost of one sweep of the rows).
-            _ => {
-                let solved = self.solved_settings(theta, &free, which)?;
-                let share = 1.0 / solved.len() as f64;
-                let mut parts = Vec::with_capacity(2);
-                for (m, columns, inflation) in solved {
-                    sigmas.push(self.sigmas_of(&m, &columns, inflation));
-                    parts.push((m, share * inflation * inflation));
-                }
-                if parts.len() == 2
-                    && let (Some((b, wb)), Some((a, wa))) = (parts.pop(), parts.pop())
-                {
-                    parts = match Marginals::blend(a, wa, b, wb) {
-                        Ok(m) => vec![(m, 1.0)],
-                        Err((a, b)) => vec![(a, wa), (b, wb)],
-                    };
-                }
-                self.add_path_covariance(theta, &free, rows, &parts, &mut path);
-            }
-        }
-        let params = mean_sigmas(sigmas);
+        self.put_path_covariance(theta, &free, rows, (&marginals, weight), &mut path);
         self.add_along_track_spread(theta, rows, &mut path);
         Some(Uncertainty { params, path })
     }
 
-    /// Adds `sum_k w_k H P_k H^T` over `parts` (`(P_k, w_k)`) to `path` at
-    /// `rows` (a row still NaN takes it as it is): one sweep of the path's
-    /// derivatives, in chunks side by side.
-    fn add_path_covariance(
+    /// The marginals the uncertainty is drawn from and the weight that folds
+    /// its widening in: this model's own, `c^2 P`, or over the two ends of
+    /// [`crate::contract::ModelSpec::band_specs`] their mean,
+    /// `(c_a^2 P_a + c_b^2 P_b) / 2`, as one square root per stage
+    /// ([`Marginals::mix`]), so that the rows are swept once. Also the
+    /// parameters' sigmas, the root of the settings' mean variance. Short
+    /// rides solve the two side by side from one linearisation; past [`SIDE_BY_SIDE_FIXES`] the second
+    /// setting's backward pass is mixed into the first's marginals as it
+    /// goes, so that one setting's chain and marginals are held at a time.
+    fn drawn_marginals(
+        &self,
+        theta: &[f64],
+        free: &[bool],
+        which: PathRows,
+    ) -> Option<(Marginals, f64, Vec<Option<f64>>)> {
+        match self.spec.band_specs() {
+            None => {
+                let (m, columns, c) = self.solved(self.chain_system(theta, free)?, theta, which)?;
+                let sigmas = self.sigmas_of(&m.var, &columns, c);
+                Some((m, c * c, sigmas))
+            }
+            Some([first, second]) if self.observed_fixes() > SIDE_BY_SIDE_FIXES => {
+                let (a, columns, ca) = self.solved_under(first, None, theta, free, which)?;
+                let mut sigmas = vec![self.sigmas_of(&a.var, &columns, ca)];
+                let m = self.with_spec(second).ok()?;
+                let cb = m.residual_inflation(theta);
+                let chain = m.chain_system(theta, free)?;
+                if chain.columns() != columns.as_slice() {
+                    return None;
+                }
+                let (mixed, own) = chain.marginals_mixed(which, a, 0.5 * ca * ca, 0.5 * cb * cb)?;
+                sigmas.push(self.sigmas_of(&own, &columns, cb));
+                Some((mixed, 1.0, mean_sigmas(sigmas)))
+            }
+            Some(_) => {
+                let mut solved = self.solved_settings(theta, free, which)?.into_iter();
+                let ((a, columns, ca), (b, _, cb)) = (solved.next()?, solved.next()?);
+                let sigmas = vec![
+                    self.sigmas_of(&a.var, &columns, ca),
+                    self.sigmas_of(&b.var, &columns, cb),
+                ];
+                let mixed = Marginals::mix(a, 0.5 * ca * ca, b, 0.5 * cb * cb)?;
+                Some((mixed, 1.0, mean_sigmas(sigmas)))
+            }
+        }
+    }
+
+    /// Puts `w H P H^T` (`part = (P, w)`) into `path` at `rows`: one sweep
+    /// of the path's derivatives, in chunks side by side.
+    fn put_path_covariance(
         &self,
         theta: &[f64],
         free: &[bool],
         rows: &[usize],
-        parts: &[(Marginals, f64)],
+        (marginals, w): (&Marginals, f64),
         path: &mut [[f64; 4]],
     ) {
         // Chunks side by side (the covariance at every row is most of the
@@ -291,21 +304,9 @@ impl Model {
             |out: &mut Option<(usize, usize, &mut [[f64; 4]])>, row, p, _, sums| {
                 let Some((start, k, out)) = out else { return };
                 while *k < rows.len() && rows[*k] == row {
-                    let mut c = [0.0; 4];
-                    for (marginals, w) in parts {
-                        let one = marginals.path_covariance(row, p, |i| sums.dp(i, p));
-                        for (a, b) in c.iter_mut().zip(one) {
-                            *a += w * b;
-                        }
-                    }
+                    let c = marginals.path_covariance(row, p, |i| sums.dp(i, p));
                     if let Some(slot) = out.get_mut(*k - *start) {
-                        if slot[0].is_nan() {
-                            *slot = c;
-                        } else {
-                            for (a, b) in slot.iter_mut().zip(c) {
-                                *a += b;
-                            }
-                        }
+                        *slot = c.map(|v| w * v);
                     }
                     *k += 1;
                 }
@@ -666,7 +667,54 @@ mod tests {
             .collect();
         let mut ends = ends.into_iter();
         let (a, b) = (ends.next().unwrap(), ends.next().unwrap());
-        assert!(Marginals::blend(a, 0.5, b, 0.5).is_ok());
+        let n = a.stage_count();
+        let mixed = Marginals::mix(a, 0.5, b, 0.5).expect("the same columns");
+        assert_eq!(mixed.stage_count(), n);
+    }
+
+    /// The second setting's backward pass mixed into the first's marginals
+    /// as it goes (how a long ride averages its band) gives what mixing the
+    /// two settings' whole marginals does, row by row and column by column,
+    /// and hands back the second setting's own variances.
+    #[test]
+    fn marginals_mixed_as_the_pass_goes_equal_the_mixed_whole() {
+        let (m, p, _, _, _) = dense_case(Some(20.0), 1.2);
+        let mut spec = m.spec.clone();
+        spec.band_taus = Some((12.0, 45.0));
+        let free = m.free_mask(&[Role::Global, Role::Segments, Role::Step2Only]);
+        let chains: Vec<ChainSystem> = spec
+            .band_specs()
+            .unwrap()
+            .into_iter()
+            .map(|s| m.with_spec(s).unwrap().chain_system(&p, &free).unwrap())
+            .collect();
+        let marg = |k: usize| chains[k].marginals(PathRows::All).unwrap();
+        let (wa, wb) = (0.4, 0.9);
+        let whole = Marginals::mix(marg(0), wa, marg(1), wb).unwrap();
+        let (streamed, own) = chains[1]
+            .marginals_mixed(PathRows::All, marg(0), wa, wb)
+            .unwrap();
+        assert_eq!(own, marg(1).var);
+        assert_eq!(streamed.var, whole.var);
+        assert_eq!(streamed.stage_count(), whole.stage_count());
+        let (mut rows, mut pairs) = (0, Vec::new());
+        m.prefix_sweep(
+            &p,
+            &free,
+            &(0..m.signals.len()).collect::<Vec<_>>(),
+            |row, pos, _, sums| {
+                pairs.push((
+                    streamed.path_covariance(row, pos, |i| sums.dp(i, pos)),
+                    whole.path_covariance(row, pos, |i| sums.dp(i, pos)),
+                ));
+                rows += 1;
+            },
+        );
+        assert_eq!(rows, m.signals.len());
+        for (row, (got, want)) in pairs.iter().enumerate() {
+            assert!(want[0] > 0.0, "row {row}");
+            assert_eq!(got, want, "row {row}");
+        }
     }
 
     /// On a long ride the backward pass stays sane: every row's horizontal

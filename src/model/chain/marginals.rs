@@ -38,6 +38,7 @@ pub struct Marginals {
 }
 
 /// What moves the path at the rows of one state of the forward pass, and its covariance.
+#[derive(Clone)]
 pub(super) struct StageCov {
     pub(super) first_row: usize,
     /// The origin `c` of `T` in this state.
@@ -50,9 +51,9 @@ pub(super) struct StageCov {
 }
 
 impl StageCov {
-    /// Whether `other` is this stage under other noise settings: the same
-    /// rows, unknowns, blocks and origin.
-    fn blends_with(&self, other: &StageCov) -> bool {
+    /// Whether `other` moves the path through the same unknowns in the same
+    /// order (the same blocks, `s` and globals), each with a full square root.
+    fn same_unknowns(&self, other: &StageCov) -> bool {
         let same_cols = self.cols.len() == other.cols.len()
             && self
                 .cols
@@ -64,15 +65,94 @@ impl StageCov {
                     _ => false,
                 });
         same_cols
-            && self.first_row == other.first_row
             && self.spans == other.spans
-            && self.origin == other.origin
             && self.l.nrows() == self.cols.len()
             && other.l.nrows() == other.cols.len()
     }
 
-    /// See [`Marginals::blend`] (the two [`StageCov::blends_with`] each other).
-    fn blend(a: &StageCov, wa: f64, b: &StageCov, wb: f64) -> StageCov {
+    /// `other`'s values in this stage's buffers where they are the same size.
+    fn take_values(&mut self, other: StageCov) {
+        self.first_row = other.first_row;
+        self.origin = other.origin;
+        if self.cols.len() == other.cols.len() {
+            self.cols.copy_from_slice(&other.cols);
+        } else {
+            self.cols = other.cols;
+        }
+        if self.spans.len() == other.spans.len() {
+            self.spans.copy_from_slice(&other.spans);
+        } else {
+            self.spans = other.spans;
+        }
+        if self.l.shape() == other.l.shape() {
+            self.l.copy_from(&other.l);
+        } else {
+            self.l = other.l;
+        }
+    }
+
+    /// This stage with `T` taken about `origin` instead of its own `c`: the
+    /// path moves by `U x (p - c) + T = U x (p - c') + T'`, so
+    /// `T' = T + U x (c' - c) = T - [c' - c]_x U`, and the rows of `T` in the
+    /// square root gain `-[c' - c]_x` times those of `U`. `None` where a
+    /// component of `s` is not among its unknowns (the backward pass keeps all six).
+    fn about(&self, origin: Vector3<f64>) -> Option<StageCov> {
+        let mut out = self.clone();
+        if origin == self.origin {
+            return Some(out);
+        }
+        let row = |k: usize| {
+            self.cols
+                .iter()
+                .position(|c| matches!(*c, StageCol::S(j) if j == k))
+        };
+        let rows: Vec<usize> = (0..6).map(row).collect::<Option<_>>()?;
+        let m = -(origin - self.origin).cross_matrix();
+        for j in 0..3 {
+            for k in 0..3 {
+                for c in 0..out.l.ncols() {
+                    out.l[(rows[3 + j], c)] += m[(j, k)] * self.l[(rows[k], c)];
+                }
+            }
+        }
+        out.origin = origin;
+        Some(out)
+    }
+
+    /// The stage whose covariance is `wa P_a + wb P_b` (see
+    /// [`Marginals::mix`]), seen from `first_row` on, at `a`'s origin. Over
+    /// the same unknowns, one square root: the triangle of the QR of
+    /// `[sqrt(wa) S_a L_a | sqrt(wb) S_b L_b]^T` (`S` the unknowns' scaling,
+    /// taken out so that the two share one), so that `R^T R` is the weighted
+    /// sum and a row's covariance costs what one setting's does. Over other
+    /// unknowns (the two passes changed state at other moments), the two
+    /// side by side: `diag(sqrt(wa) L_a, sqrt(wb) L_b)` over `a`'s unknowns
+    /// and then `b`'s, whose `H L` has both parts' columns.
+    fn mix(a: &StageCov, wa: f64, b: &StageCov, wb: f64, first_row: usize) -> Option<StageCov> {
+        let b = b.about(a.origin)?;
+        if !a.same_unknowns(&b) {
+            let (ka, kb) = (a.cols.len(), b.cols.len());
+            let (na, nb) = (a.l.ncols(), b.l.ncols());
+            let mut l = DMatrix::<f64>::zeros(a.l.nrows() + b.l.nrows(), na + nb);
+            l.view_mut((0, 0), (a.l.nrows(), na))
+                .copy_from(&(&a.l * wa.sqrt()));
+            l.view_mut((a.l.nrows(), na), (b.l.nrows(), nb))
+                .copy_from(&(&b.l * wb.sqrt()));
+            let spans = a
+                .spans
+                .iter()
+                .copied()
+                .chain(b.spans.iter().map(|&(f, e, c0, m)| (f, e, c0 + ka, m)))
+                .collect();
+            debug_assert_eq!(l.nrows(), ka + kb);
+            return Some(StageCov {
+                first_row,
+                origin: a.origin,
+                cols: a.cols.iter().chain(&b.cols).copied().collect(),
+                spans,
+                l,
+            });
+        }
         let k = a.cols.len();
         let scale = |c: &StageCol| match *c {
             StageCol::Param(_, inv) => inv,
@@ -103,13 +183,81 @@ impl StageCov {
                 other => other,
             })
             .collect();
-        StageCov {
-            first_row: a.first_row,
+        Some(StageCov {
+            first_row,
             origin: a.origin,
             cols,
             spans: a.spans.clone(),
             l: r.transpose(),
+        })
+    }
+}
+
+/// `wa a + wb b`, element by element.
+fn mixed_var(a: &[f64], wa: f64, b: &[f64], wb: f64) -> Vec<f64> {
+    a.iter().zip(b).map(|(p, q)| wa * p + wb * q).collect()
+}
+
+/// Mixes a second setting's stages, as its backward pass hands them over
+/// (last first), into a first setting's (see [`Marginals::mix`]): each row
+/// is seen in the stage of each that it lies in, so the mixed stages start
+/// wherever either does, each pairing the two stages that hold from there.
+/// The first setting's stages are let go as they are passed, so the two
+/// settings take about one's memory (a 6-hour ride's hold some 60 MB).
+pub(super) struct Mixer {
+    /// The first setting's stages not yet passed, in row order.
+    a: Vec<StageCov>,
+    wa: f64,
+    wb: f64,
+    /// Mixed stages, last first.
+    out: Vec<StageCov>,
+    failed: bool,
+}
+
+impl Mixer {
+    pub(super) fn new(a: Vec<StageCov>, wa: f64, wb: f64) -> Self {
+        let out = Vec::with_capacity(a.len());
+        Self {
+            a,
+            wa,
+            wb,
+            out,
+            failed: false,
         }
+    }
+
+    /// The second setting's next stage (each earlier than the one before).
+    pub(super) fn take(&mut self, b: &StageCov) {
+        while let Some(a) = self.a.last() {
+            let first = a.first_row.max(b.first_row);
+            let Some(mixed) = StageCov::mix(a, self.wa, b, self.wb, first) else {
+                self.failed = true;
+                return;
+            };
+            if a.first_row < b.first_row {
+                self.out.push(mixed);
+                return;
+            }
+            let same = a.first_row == b.first_row;
+            // The first setting's stage is passed: the mixture takes its
+            // place in its own buffers, so that the long-lived allocations
+            // stay the ones made before (fragments of freed stages between
+            // new ones kept a 6-hour ride's heap 20 MB larger).
+            if let Some(mut a) = self.a.pop() {
+                a.take_values(mixed);
+                self.out.push(a);
+            }
+            if same {
+                return;
+            }
+        }
+    }
+
+    /// The mixed stages in row order.
+    pub(super) fn finish(self) -> Option<Vec<StageCov>> {
+        let mut out = self.out;
+        out.reverse();
+        (!self.failed).then_some(out)
     }
 }
 
@@ -122,41 +270,28 @@ pub(super) enum StageCol {
 
 impl Marginals {
     /// `wa P_a + wb P_b`: the marginals of a mixture of two settings of one
-    /// model (the same stages, unknowns and blocks; only the noise differs),
-    /// each stage's square root the triangle of the QR of
-    /// `[sqrt(wa) S_a L_a | sqrt(wb) S_b L_b]^T` (`S` the unknowns' scaling,
-    /// taken out so that the two share one): `R^T R` is their weighted sum,
-    /// and the path's covariance at a row then costs what one setting's
-    /// does. The two are consumed stage by stage (on a 6-hour ride each
-    /// holds some 60 MB); handed back where they differ in structure.
-    pub fn blend(
-        a: Marginals,
-        wa: f64,
-        b: Marginals,
-        wb: f64,
-    ) -> Result<Marginals, (Marginals, Marginals)> {
-        let same = a.stages.len() == b.stages.len()
-            && a.var.len() == b.var.len()
-            && a.stages
-                .iter()
-                .zip(&b.stages)
-                .all(|(x, y)| x.blends_with(y));
-        if !same {
-            return Err((a, b));
+    /// model (the same free columns; only the noise differs), stage by stage
+    /// (see [`StageCov::mix`]): the path's covariance at a row then costs
+    /// what one setting's does. `None` where the columns differ.
+    pub fn mix(a: Marginals, wa: f64, b: Marginals, wb: f64) -> Option<Marginals> {
+        if a.var.len() != b.var.len() {
+            return None;
         }
-        let var = a
-            .var
-            .iter()
-            .zip(&b.var)
-            .map(|(p, q)| wa * p + wb * q)
-            .collect();
-        let stages = a
-            .stages
-            .into_iter()
-            .zip(b.stages)
-            .map(|(x, y)| StageCov::blend(&x, wa, &y, wb))
-            .collect();
-        Ok(Marginals { var, stages })
+        let var = mixed_var(&a.var, wa, &b.var, wb);
+        let mut mixer = Mixer::new(a.stages, wa, wb);
+        for st in b.stages.iter().rev() {
+            mixer.take(st);
+        }
+        Some(Marginals {
+            var,
+            stages: mixer.finish()?,
+        })
+    }
+
+    /// How many stages the path's covariance is kept for.
+    #[cfg(test)]
+    pub(crate) fn stage_count(&self) -> usize {
+        self.stages.len()
     }
 
     /// The covariance of the path at `row` (at `p`): `H P H^T = |H L|^2` with `H` the
@@ -335,6 +470,38 @@ impl ChainSystem {
     /// 2.5 kB per state: 29 MB for every row of a 6-hour ride, a few MB for
     /// the few thousand rows a view draws.
     pub(crate) fn marginals(&self, rows: PathRows) -> Option<Marginals> {
+        let mut stages = Vec::new();
+        let var = self.walk_back(rows, &mut |st| stages.push(st))?;
+        stages.reverse();
+        Some(Marginals { var, stages })
+    }
+
+    /// [`Self::marginals`] of this setting mixed into `a`'s, another
+    /// setting's of the same model (see [`Marginals::mix`]), stage by stage
+    /// as the backward pass hands them over, so that this setting's are
+    /// never all held. Also this setting's own variances. `None` as for
+    /// `marginals`, or where the columns differ.
+    pub(crate) fn marginals_mixed(
+        &self,
+        rows: PathRows,
+        a: Marginals,
+        wa: f64,
+        wb: f64,
+    ) -> Option<(Marginals, Vec<f64>)> {
+        let mut mixer = Mixer::new(a.stages, wa, wb);
+        let own = self.walk_back(rows, &mut |st| mixer.take(&st))?;
+        if own.len() != a.var.len() {
+            return None;
+        }
+        let var = mixed_var(&a.var, wa, &own, wb);
+        let stages = mixer.finish()?;
+        Some((Marginals { var, stages }, own))
+    }
+
+    /// The backward pass of [`Self::marginals`]: every free column's
+    /// variance, and each stage of `rows` handed to `sink` as it is reached
+    /// (last first).
+    fn walk_back(&self, rows: PathRows, sink: &mut dyn FnMut(StageCov)) -> Option<Vec<f64>> {
         let solved = self.run(0.0, !matches!(rows, PathRows::None), true)?;
         let f = &solved.forward;
         let lin = &self.lin;
@@ -374,7 +541,6 @@ impl ChainSystem {
             }
         };
         keep_var(&walk, &mut var);
-        let mut stages: Vec<StageCov> = Vec::with_capacity(f.stages.len());
         let mut origin = f.origin;
         let mut mark = f.stages.len();
         let mut store = |walk: &CovWalk, at: usize, origin: Vector3<f64>, mark: &mut usize| {
@@ -383,7 +549,7 @@ impl ChainSystem {
                 let st = &f.stages[*mark];
                 let end = f.stages.get(*mark + 1).map_or(lin.horizon, |n| n.first_row);
                 if st.ops == at && rows.wants(st.first_row, end) {
-                    stages.push(self.stage_cov(walk, st.first_row, end, origin, &f.scale));
+                    sink(self.stage_cov(walk, st.first_row, end, origin, &f.scale));
                 }
             }
         };
@@ -428,10 +594,7 @@ impl ChainSystem {
             });
             store(&walk, i, origin, &mut mark);
         }
-        stages.reverse();
-        var.iter()
-            .all(|v| v.is_finite())
-            .then_some(Marginals { var, stages })
+        var.iter().all(|v| v.is_finite()).then_some(var)
     }
 
     /// The covariance of what moves the path at rows `first..end` (all seen
@@ -482,6 +645,111 @@ impl ChainSystem {
             cols,
             spans,
             l: walk.select(&idx),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stage over `s` (and, with `param`, one parameter of a block over
+    /// rows `0..=99`) about `origin`, with a full square root of numbers
+    /// drawn from `seed`.
+    fn stage(first_row: usize, origin: Vector3<f64>, param: bool, seed: f64) -> StageCov {
+        let mut cols: Vec<StageCol> = (0..6).map(StageCol::S).collect();
+        let mut spans = Vec::new();
+        if param {
+            spans.push((0, 99, 0, 1));
+            cols.insert(0, StageCol::Param(0, 0.5));
+        }
+        let k = cols.len();
+        let l = DMatrix::from_fn(k, k, |r, c| {
+            if c > r {
+                0.0
+            } else {
+                ((r * 7 + c * 3) as f64 + seed).sin() + if r == c { 2.0 } else { 0.0 }
+            }
+        });
+        StageCov {
+            first_row,
+            origin,
+            cols,
+            spans,
+            l,
+        }
+    }
+
+    fn marginals(stages: Vec<StageCov>) -> Marginals {
+        Marginals {
+            var: vec![1.0],
+            stages,
+        }
+    }
+
+    /// The path's covariance at `row` (at a point that moves with the row).
+    fn at(m: &Marginals, row: usize) -> [f64; 4] {
+        let p = Vector3::new(3.0 + row as f64, -2.0, 0.5);
+        m.path_covariance(row, &p, |_| Vector3::new(1.0, 0.3, -0.2))
+    }
+
+    /// Two settings whose passes changed state at other rows, over other
+    /// unknowns and about other origins mix into `wa P_a + wb P_b` at every
+    /// row: the mixed stages start wherever either setting's does and pair
+    /// the two that hold there, side by side where their unknowns differ.
+    #[test]
+    fn mixed_stages_are_the_weighted_sum_at_every_row() {
+        let o = |x: f64| Vector3::new(x, 1.0 - x, 0.2 * x);
+        let a = || {
+            marginals(vec![
+                stage(0, o(0.0), false, 0.1),
+                stage(10, o(0.0), true, 0.7),
+                stage(30, o(4.0), true, 1.3),
+            ])
+        };
+        let b = || {
+            marginals(vec![
+                stage(0, o(0.0), false, 2.1),
+                stage(5, o(1.0), false, 2.9),
+                stage(10, o(1.0), true, 3.3),
+                stage(22, o(-3.0), true, 4.4),
+            ])
+        };
+        let (wa, wb) = (0.3, 1.7);
+        let (sa, sb) = (a(), b());
+        let mixed = Marginals::mix(a(), wa, b(), wb).expect("same columns");
+        assert_eq!(
+            mixed.stages.iter().map(|s| s.first_row).collect::<Vec<_>>(),
+            [0, 5, 10, 22, 30]
+        );
+        for row in 0..40 {
+            let (pa, pb, got) = (at(&sa, row), at(&sb, row), at(&mixed, row));
+            for k in 0..4 {
+                let want = wa * pa[k] + wb * pb[k];
+                assert!(
+                    (got[k] - want).abs() <= 1e-10 * want.abs().max(1.0),
+                    "row {row}, entry {k}: {} against {want}",
+                    got[k]
+                );
+            }
+        }
+        assert!((mixed.var[0] - (wa + wb)).abs() < 1e-12);
+    }
+
+    /// Taken about another origin, a stage moves the path as before.
+    #[test]
+    fn a_stage_about_another_origin_moves_the_path_alike() {
+        let st = stage(0, Vector3::new(1.0, 2.0, 3.0), true, 0.4);
+        let moved = st.about(Vector3::new(-5.0, 0.5, 9.0)).expect("all of s");
+        let (before, after) = (marginals(vec![st]), marginals(vec![moved]));
+        for row in [0, 50, 99] {
+            let (x, y) = (at(&before, row), at(&after, row));
+            for k in 0..4 {
+                assert!(
+                    (x[k] - y[k]).abs() <= 1e-10 * x[k].abs().max(1.0),
+                    "row {row}"
+                );
+            }
         }
     }
 }
