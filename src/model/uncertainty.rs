@@ -90,48 +90,8 @@ impl Model {
         if self.spec.band_specs().is_none() {
             return self.parameter_sigmas(theta);
         }
-        match self.solved_settings(theta, &free, PathRows::None) {
-            Some(solved) => mean_sigmas(
-                solved
-                    .iter()
-                    .map(|(m, columns, inflation)| self.sigmas_of(&m.var, columns, *inflation))
-                    .collect(),
-            ),
-            None => self.parameter_sigmas(theta),
-        }
-    }
-
-    /// The marginals (at `which` rows), their columns and the widening of
-    /// each setting the uncertainty is drawn under: this model's own, or the
-    /// two ends of [`crate::contract::ModelSpec::band_specs`], solved side by
-    /// side from one linearisation of the ride (the settings differ only in
-    /// how the fixes are whitened); on rides over [`SIDE_BY_SIDE_FIXES`] one
-    /// after the other, each from its own, so that one chain system is held
-    /// at a time.
-    fn solved_settings(
-        &self,
-        theta: &[f64],
-        free: &[bool],
-        which: PathRows,
-    ) -> Option<Vec<(Marginals, Vec<usize>, f64)>> {
-        let Some(specs) = self.spec.band_specs() else {
-            return Some(vec![self.solved(
-                self.chain_system(theta, free)?,
-                theta,
-                which,
-            )?]);
-        };
-        if self.observed_fixes() > SIDE_BY_SIDE_FIXES {
-            return specs
-                .into_iter()
-                .map(|s| self.solved_under(s, None, theta, free, which))
-                .collect();
-        }
-        let base = self.chain_system(theta, free)?;
-        specs
-            .into_par_iter()
-            .map(|s| self.solved_under(s, Some(&base), theta, free, which))
-            .collect()
+        self.drawn_marginals(theta, &free, PathRows::None)
+            .map_or_else(|| self.parameter_sigmas(theta), |(_, _, sigmas)| sigmas)
     }
 
     /// [`Self::solved`] for this model under `spec` (one of the band's
@@ -218,9 +178,11 @@ impl Model {
     /// `(c_a^2 P_a + c_b^2 P_b) / 2`, as one square root per stage
     /// ([`Marginals::mix`]), so that the rows are swept once. Also the
     /// parameters' sigmas, the root of the settings' mean variance. Short
-    /// rides solve the two side by side from one linearisation; past [`SIDE_BY_SIDE_FIXES`] the second
-    /// setting's backward pass is mixed into the first's marginals as it
-    /// goes, so that one setting's chain and marginals are held at a time.
+    /// rides solve the two side by side from one linearisation of the ride
+    /// (the settings differ only in how the fixes are whitened); past
+    /// [`SIDE_BY_SIDE_FIXES`] the second setting's backward pass is mixed
+    /// into the first's marginals as it goes, so that one setting's chain
+    /// and marginals are held at a time.
     fn drawn_marginals(
         &self,
         theta: &[f64],
@@ -246,8 +208,14 @@ impl Model {
                 sigmas.push(self.sigmas_of(&own, &columns, cb));
                 Some((mixed, 1.0, mean_sigmas(sigmas)))
             }
-            Some(_) => {
-                let mut solved = self.solved_settings(theta, free, which)?.into_iter();
+            Some(specs) => {
+                let base = self.chain_system(theta, free)?;
+                let solved: Vec<_> = specs
+                    .into_par_iter()
+                    .map(|s| self.solved_under(s, Some(&base), theta, free, which))
+                    .collect::<Option<_>>()?;
+                drop(base);
+                let mut solved = solved.into_iter();
                 let ((a, columns, ca), (b, _, cb)) = (solved.next()?, solved.next()?);
                 let sigmas = vec![
                     self.sigmas_of(&a.var, &columns, ca),

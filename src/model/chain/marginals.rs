@@ -70,27 +70,6 @@ impl StageCov {
             && other.l.nrows() == other.cols.len()
     }
 
-    /// `other`'s values in this stage's buffers where they are the same size.
-    fn take_values(&mut self, other: StageCov) {
-        self.first_row = other.first_row;
-        self.origin = other.origin;
-        if self.cols.len() == other.cols.len() {
-            self.cols.copy_from_slice(&other.cols);
-        } else {
-            self.cols = other.cols;
-        }
-        if self.spans.len() == other.spans.len() {
-            self.spans.copy_from_slice(&other.spans);
-        } else {
-            self.spans = other.spans;
-        }
-        if self.l.shape() == other.l.shape() {
-            self.l.copy_from(&other.l);
-        } else {
-            self.l = other.l;
-        }
-    }
-
     /// This stage with `T` taken about `origin` instead of its own `c`: the
     /// path moves by `U x (p - c) + T = U x (p - c') + T'`, so
     /// `T' = T + U x (c' - c) = T - [c' - c]_x U`, and the rows of `T` in the
@@ -98,9 +77,6 @@ impl StageCov {
     /// component of `s` is not among its unknowns (the backward pass keeps all six).
     fn about(&self, origin: Vector3<f64>) -> Option<StageCov> {
         let mut out = self.clone();
-        if origin == self.origin {
-            return Some(out);
-        }
         let row = |k: usize| {
             self.cols
                 .iter()
@@ -129,8 +105,14 @@ impl StageCov {
     /// side by side: `diag(sqrt(wa) L_a, sqrt(wb) L_b)` over `a`'s unknowns
     /// and then `b`'s, whose `H L` has both parts' columns.
     fn mix(a: &StageCov, wa: f64, b: &StageCov, wb: f64, first_row: usize) -> Option<StageCov> {
-        let b = b.about(a.origin)?;
-        if !a.same_unknowns(&b) {
+        let moved;
+        let b = if b.origin == a.origin {
+            b
+        } else {
+            moved = b.about(a.origin)?;
+            &moved
+        };
+        if !a.same_unknowns(b) {
             let (ka, kb) = (a.cols.len(), b.cols.len());
             let (na, nb) = (a.l.ncols(), b.l.ncols());
             let mut l = DMatrix::<f64>::zeros(a.l.nrows() + b.l.nrows(), na + nb);
@@ -239,14 +221,9 @@ impl Mixer {
                 return;
             }
             let same = a.first_row == b.first_row;
-            // The first setting's stage is passed: the mixture takes its
-            // place in its own buffers, so that the long-lived allocations
-            // stay the ones made before (fragments of freed stages between
-            // new ones kept a 6-hour ride's heap 20 MB larger).
-            if let Some(mut a) = self.a.pop() {
-                a.take_values(mixed);
-                self.out.push(a);
-            }
+            // The first setting's stage is passed: let go.
+            self.a.pop();
+            self.out.push(mixed);
             if same {
                 return;
             }
